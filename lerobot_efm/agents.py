@@ -1,0 +1,401 @@
+"""The EFM components (Critic, Actor, Planner, World) and the five agents of the paper's Table I.
+
+Each agent is one class whose ``losses`` read like the table's *Training* column and whose ``act``
+reads like its *Inference* column. Observations arrive already encoded as latents ``l``; the shared
+:class:`EFMAgent` base does the encoding and builds the training rows:
+
+* the hindsight rows (o, tau^o, tau^a, d, g) of the dataset,
+* the *reached* rows (o, hold, hold, 0, o): the goal is the current observation, nothing moves,
+* with ``use_rl`` the bootstrap rows (o, tau^o, tau^a, d + Critic(eps_g | g, g'), g') of eq. (5).
+
+Distances are handled as d / L_g (one raw scalar, as in the reference).
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+
+from .configuration_efm import GOAL_DISTANCE_KEY, GOAL_PREFIX, OBS_PREFIX, RL_GOAL_PREFIX, TRAJ_PREFIX, EFMConfig
+from .flow import euler_integrate, flow_matching_loss, interpolate, sample_source
+from .networks import ConditionalUnet1d, EnsembleMLPFlow, ObservationEncoder
+
+# --------------------------------------------------------------------------------------------------
+# Components
+# --------------------------------------------------------------------------------------------------
+
+
+class Critic(nn.Module):
+    """Critic: U(0,1) | c -> d, a 1-D flow per member; members run as one batched ensemble.
+
+    ``query(c, eps)`` integrates deterministically from ``eps`` (the extremum query: eps=0 is the
+    minimum of P(d | c)); ``distance`` combines the members with max (pessimistic for a cost).
+    """
+
+    def __init__(self, cond_dim: int, num_critics: int, hidden_dims: tuple[int, ...]):
+        super().__init__()
+        self.num_critics = num_critics
+        self.net = EnsembleMLPFlow(num_critics, 1, cond_dim, hidden_dims)
+
+    def loss(self, cond: Tensor, distance: Tensor) -> Tensor:
+        """Eq. (1) with x_src ~ U(0,1), x_dst = d, independently per member; returns the sum over members."""
+        shape = (self.num_critics, cond.shape[0], 1)
+        x_src = torch.rand(shape, device=cond.device)
+        t = torch.rand(shape, device=cond.device)
+        x_t, target = interpolate(x_src, distance.reshape(1, -1, 1).expand(shape), t)
+        return flow_matching_loss(self.net(x_t, t, cond), target) * self.num_critics
+
+    def query(self, cond: Tensor, eps: float | Tensor, num_steps: int) -> Tensor:
+        """Critic(eps | c) for every member: (E, B). ``eps`` is a float or an (E, B) tensor."""
+        cache = self.net.condition(cond)
+        x0 = torch.as_tensor(eps, dtype=cond.dtype, device=cond.device)
+        x0 = x0.reshape(x0.shape + (1,)).expand(self.num_critics, cond.shape[0], 1)
+        return euler_integrate(lambda x, t: self.net.velocity(x, t, cache), x0, num_steps).squeeze(-1)
+
+    def distance(self, cond: Tensor, eps: float | Tensor, num_steps: int) -> Tensor:
+        return self.query(cond, eps, num_steps).amax(dim=0)
+
+
+class TrajectoryFlow(nn.Module):
+    """P_src | c -> trajectory (L, C): the Actor (UNet over time) and the Planner / World (MLP)."""
+
+    def __init__(self, length: int, channels: int, cond_dim: int, config: EFMConfig, kind: str):
+        super().__init__()
+        self.length, self.channels, self.source = length, channels, config.trajectory_source
+        if kind == "unet":
+            self.net = ConditionalUnet1d(
+                channels, cond_dim, config.unet_down_dims, config.unet_time_embed_dim, config.unet_kernel_size, config.unet_n_groups
+            )
+        else:
+            self.net = _FlatMLPFlow(length * channels, cond_dim, config.mlp_hidden_dims)
+
+    def loss(self, cond: Tensor, target: Tensor) -> Tensor:
+        x_src = sample_source(self.source, tuple(target.shape), 2, device=target.device)
+        t = torch.rand(target.shape[0], device=target.device)
+        x_t, velocity = interpolate(x_src, target, t)
+        return flow_matching_loss(self.net(x_t, t, cond), velocity)
+
+    def sample(self, cond: Tensor, num_steps: int) -> Tensor:
+        cache = self.net.condition(cond)
+        x0 = sample_source(self.source, (cond.shape[0], self.length, self.channels), 2, device=cond.device)
+        return euler_integrate(lambda x, t: self.net.velocity(x, t, cache), x0, num_steps)
+
+
+class _FlatMLPFlow(nn.Module):
+    """A single-member :class:`EnsembleMLPFlow` over flattened trajectories (B, L, C)."""
+
+    def __init__(self, x_dim: int, cond_dim: int, hidden_dims: tuple[int, ...]):
+        super().__init__()
+        self.mlp = EnsembleMLPFlow(1, x_dim, cond_dim, hidden_dims)
+
+    def condition(self, cond: Tensor) -> Tensor:
+        return self.mlp.condition(cond)
+
+    def velocity(self, x: Tensor, t: Tensor, cache: Tensor) -> Tensor:
+        t = t.reshape(1, -1, 1) if t.dim() else t
+        return self.mlp.velocity(x.reshape(1, x.shape[0], -1), t, cache).reshape(x.shape)
+
+    def forward(self, x: Tensor, t: Tensor, cond: Tensor) -> Tensor:
+        return self.velocity(x, t, self.condition(cond))
+
+
+# --------------------------------------------------------------------------------------------------
+# Training rows
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Rows:
+    """Encoded training tuples (l_o, tau^o, tau^a, d, l_g) of the paper's Sec. II-B."""
+
+    obs: Tensor  # (N, D) latent observation l_o
+    goal: Tensor  # (N, D) latent goal l_g
+    distance: Tensor  # (N,) d / L_g
+    actions: Tensor  # (N, L_a, A) action trajectory tau^a
+    obs_traj: Tensor | None  # (N, L_o, D) latent observation trajectory tau^o (stop-gradient targets)
+
+    def cat(self, other: Rows) -> Rows:
+        return Rows(
+            torch.cat([self.obs, other.obs]),
+            torch.cat([self.goal, other.goal]),
+            torch.cat([self.distance, other.distance]),
+            torch.cat([self.actions, other.actions]),
+            None if self.obs_traj is None else torch.cat([self.obs_traj, other.obs_traj]),
+        )
+
+
+@dataclass
+class TrainingRows:
+    """Rows for goal-conditioned models (critic, goal-conditioned actor/planner) and for goal-free ones.
+
+    Goal-free models (FM-PS/AS planners/actors, inverse-dynamics actors) do not see g or d, so the RL
+    rows, which only change g and d, would be exact duplicates for them and are left out.
+    """
+
+    goal_conditioned: Rows
+    goal_free: Rows
+
+
+# --------------------------------------------------------------------------------------------------
+# Agents
+# --------------------------------------------------------------------------------------------------
+
+
+class EFMAgent(nn.Module, abc.ABC):
+    """Encoder + components of one agent; subclasses define ``losses`` and ``act``."""
+
+    def __init__(self, config: EFMConfig, rest_action: Tensor | None = None):
+        super().__init__()
+        self.config = config
+        obs = config.observation_features
+        image_shapes = {k[len(OBS_PREFIX) :]: tuple(ft.shape) for k, ft in obs.items() if len(ft.shape) == 3}
+        vector_dims = {k[len(OBS_PREFIX) :]: ft.shape[0] for k, ft in obs.items() if len(ft.shape) == 1}
+        self.encoder = ObservationEncoder(
+            image_shapes,
+            vector_dims,
+            config.image_latent_dim,
+            config.image_encoder_channels,
+            config.image_encoder_hidden_dim,
+            config.image_encoder_dropout,
+            config.state_encoder,
+            config.state_latent_dim,
+        )
+        self.latent_dim = self.encoder.latent_dim
+        self.action_dim = config.output_features["action"].shape[0]
+        # The "stay" action of velocity commands, in normalised units (raw 0); absolute commands hold a_k.
+        self.register_buffer("rest_action", torch.zeros(self.action_dim) if rest_action is None else rest_action.float())
+        if config.uses_critic:
+            self.critic = Critic(2 * self.latent_dim, config.num_critics, config.mlp_hidden_dims)
+        self.build_components(self.latent_dim, self.action_dim)
+
+    @abc.abstractmethod
+    def build_components(self, latent_dim: int, action_dim: int) -> None:
+        """Create the agent's components (besides the shared encoder and critic)."""
+
+    # --- helpers -----------------------------------------------------------------------------------
+    def _actor(self, cond_dim: int) -> TrajectoryFlow:
+        return TrajectoryFlow(self.config.action_traj_len, self.action_dim, cond_dim, self.config, "unet")
+
+    def _obs_traj_flow(self, cond_dim: int) -> TrajectoryFlow:
+        return TrajectoryFlow(self.config.obs_traj_len, self.latent_dim, cond_dim, self.config, "mlp")
+
+    def encode(self, batch: dict[str, Tensor], prefixes: tuple[str, ...]) -> list[Tensor]:
+        """Encode several mirrored key families in one encoder call (one batched pass per camera)."""
+        keys = [k[len(OBS_PREFIX) :] for k in self.config.observation_features]
+        merged = {OBS_PREFIX + k: torch.cat([batch[p + k] for p in prefixes]) for k in keys}
+        return list(self.encoder(merged).split(batch[prefixes[0] + keys[0]].shape[0]))
+
+    def critic_distance(self, obs: Tensor, goal: Tensor) -> Tensor:
+        cfg = self.config
+        return self.critic.distance(torch.cat([obs, goal], -1), cfg.critic_inference_eps, cfg.num_inference_steps)
+
+    # --- training ----------------------------------------------------------------------------------
+    def training_rows(self, batch: dict[str, Tensor], target: EFMAgent) -> TrainingRows:
+        cfg = self.config
+        use_rl = cfg.use_rl and cfg.uses_critic
+        prefixes = (OBS_PREFIX, GOAL_PREFIX) + ((RL_GOAL_PREFIX,) if use_rl else ())
+        latents = self.encode(batch, prefixes)
+        l_obs, l_goal = latents[0], latents[1]
+        actions = batch["action"]
+        distance = batch[GOAL_DISTANCE_KEY].float() / cfg.max_goal_distance
+
+        obs_traj = None
+        if cfg.uses_obs_trajectory:
+            # Planner / world targets are *stop-gradient* latents of the EMA encoder: regressing onto
+            # latents that the same loss can move lets a learned encoder collapse them.
+            with torch.no_grad():
+                traj_batch = {OBS_PREFIX + k[len(TRAJ_PREFIX) :]: v.flatten(0, 1) for k, v in batch.items() if k.startswith(TRAJ_PREFIX)}
+                obs_traj = target.encoder(traj_batch).reshape(actions.shape[0], cfg.obs_traj_len, -1)
+        rows = Rows(l_obs, l_goal, distance, actions, obs_traj)
+
+        # Reached rows: g := o, d := 0, nothing moves (absolute commands hold a_k, velocities are zero).
+        n = min(cfg.reached_augment_size, l_obs.shape[0])
+        if n:
+            hold = actions[:n, :1] if cfg.action_mode == "absolute" else self.rest_action.expand(n, 1, -1)
+            reached = Rows(
+                l_obs[:n],
+                l_obs[:n],
+                torch.zeros_like(distance[:n]),
+                hold.expand(-1, cfg.action_traj_len, -1),
+                None if obs_traj is None else obs_traj[:n, :1].expand(-1, cfg.obs_traj_len, -1),
+            )
+            rows = rows.cat(reached)
+        goal_free = rows
+
+        if use_rl:
+            rows = rows.cat(self.bootstrap_rows(batch, target, l_obs, latents[2], distance, actions, obs_traj))
+        return TrainingRows(rows, goal_free)
+
+    @torch.no_grad()
+    def bootstrap_rows(self, batch, target: EFMAgent, l_obs, l_rl_goal, distance, actions, obs_traj) -> Rows:
+        """Eq. (5): d' = d + max_e C_e^ema(eps_e | g, g'), eps_e ~ U(0, r_g), with EMA encoder and critics."""
+        cfg = self.config
+        t_goal, t_rl_goal = target.encode(batch, (GOAL_PREFIX, RL_GOAL_PREFIX))
+        eps = torch.rand(cfg.num_critics, l_obs.shape[0], device=l_obs.device) * cfg.rl_goal_ratio
+        bridge = target.critic.query(torch.cat([t_goal, t_rl_goal], -1), eps, cfg.num_inference_steps).amax(0)
+        return Rows(l_obs, l_rl_goal, distance + bridge, actions, obs_traj)
+
+    def critic_loss(self, rows: Rows) -> Tensor:
+        return self.critic.loss(torch.cat([rows.obs, rows.goal], -1), rows.distance)
+
+    @abc.abstractmethod
+    def losses(self, rows: TrainingRows) -> dict[str, Tensor]:
+        """One flow-matching loss per component, keyed by component name."""
+
+    def compute_loss(self, batch: dict[str, Tensor], target: EFMAgent) -> tuple[Tensor, dict[str, float]]:
+        rows = self.training_rows(batch, target)
+        losses = self.losses(rows)
+        total = sum(self.config.critic_loss_weight * v if k == "critic" else v for k, v in losses.items())
+        info = {f"loss_{k}": v.item() for k, v in losses.items()}
+        info["rows"] = float(rows.goal_conditioned.obs.shape[0])
+        if self.config.use_rl:
+            bootstrap = rows.goal_conditioned.distance[-batch["action"].shape[0] :]
+            info["rl_target_distance"] = bootstrap.mean().item() * self.config.max_goal_distance
+        return total, info
+
+    # --- inference ---------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def act(self, l_obs: Tensor, l_goal: Tensor) -> dict[str, Tensor]:
+        """Returns at least ``action`` (B, L_a, A); also what the agent believed (distance, plans, ...)."""
+
+    @torch.no_grad()
+    def predict(self, batch: dict[str, Tensor]) -> dict[str, Tensor]:
+        l_obs, l_goal = self.encode(batch, (OBS_PREFIX, GOAL_PREFIX))
+        out = self.act(l_obs, l_goal)
+        if "distance" in out:
+            out["distance"] = out["distance"] * self.config.max_goal_distance  # in steps
+        return out
+
+    def select_candidates(self, plans: Tensor, scores: Tensor) -> tuple[Tensor, Tensor]:
+        """Per-row argmin over candidates: plans (B, N, ...), scores (B, N) -> chosen (B, ...), index (B,)."""
+        index = scores.argmin(dim=1)
+        return plans[torch.arange(plans.shape[0], device=plans.device), index], index
+
+    def repeat_candidates(self, x: Tensor) -> Tensor:
+        return x.repeat_interleave(self.config.num_candidates, dim=0)
+
+
+class FMGC(EFMAgent):
+    """Actor: P_src | o, g -> tau^a."""
+
+    def build_components(self, latent_dim, action_dim):
+        self.actor = self._actor(2 * latent_dim)
+
+    def losses(self, rows):
+        r = rows.goal_conditioned
+        return {"actor": self.actor.loss(torch.cat([r.obs, r.goal], -1), r.actions)}
+
+    def act(self, l_obs, l_goal):
+        return {"action": self.actor.sample(torch.cat([l_obs, l_goal], -1), self.config.num_inference_steps)}
+
+
+class FMAC(EFMAgent):
+    """Critic: U(0,1) | o, g -> d;  Actor: P_src | o, g, d -> tau^a."""
+
+    def build_components(self, latent_dim, action_dim):
+        self.actor = self._actor(2 * latent_dim + 1)
+
+    def losses(self, rows):
+        r = rows.goal_conditioned
+        return {
+            "critic": self.critic_loss(r),
+            "actor": self.actor.loss(torch.cat([r.obs, r.goal, r.distance[:, None]], -1), r.actions),
+        }
+
+    def act(self, l_obs, l_goal):
+        d = self.critic_distance(l_obs, l_goal)
+        action = self.actor.sample(torch.cat([l_obs, l_goal, d[:, None]], -1), self.config.num_inference_steps)
+        return {"action": action, "distance": d}
+
+
+class FMPC(EFMAgent):
+    """Critic: U(0,1) | o, g -> d;  Planner: P_src | o, g, d -> tau^o;  Actor: P_src | o, tau^o -> tau^a."""
+
+    def build_components(self, latent_dim, action_dim):
+        self.planner = self._obs_traj_flow(2 * latent_dim + 1)
+        self.actor = self._actor(latent_dim * (1 + self.config.obs_traj_len))
+
+    def losses(self, rows):
+        r, f = rows.goal_conditioned, rows.goal_free
+        return {
+            "critic": self.critic_loss(r),
+            "planner": self.planner.loss(torch.cat([r.obs, r.goal, r.distance[:, None]], -1), r.obs_traj),
+            "actor": self.actor.loss(torch.cat([f.obs, f.obs_traj.flatten(1)], -1), f.actions),
+        }
+
+    def act(self, l_obs, l_goal):
+        steps = self.config.num_inference_steps
+        d = self.critic_distance(l_obs, l_goal)
+        plan = self.planner.sample(torch.cat([l_obs, l_goal, d[:, None]], -1), steps)
+        action = self.actor.sample(torch.cat([l_obs, plan.flatten(1)], -1), steps)
+        return {"action": action, "distance": d, "obs_plan": plan}
+
+
+class FMPS(EFMAgent):
+    """Critic: U(0,1) | o, g -> d;  Planner: P_src | o -> tau^o;  Actor: P_src | o, tau^o -> tau^a.
+
+    Inference: num_candidates plans, keep argmin Critic(0 | tau^o_-1, g), batched over rows and candidates.
+    """
+
+    def build_components(self, latent_dim, action_dim):
+        self.planner = self._obs_traj_flow(latent_dim)
+        self.actor = self._actor(latent_dim * (1 + self.config.obs_traj_len))
+
+    def losses(self, rows):
+        r, f = rows.goal_conditioned, rows.goal_free
+        return {
+            "critic": self.critic_loss(r),
+            "planner": self.planner.loss(f.obs, f.obs_traj),
+            "actor": self.actor.loss(torch.cat([f.obs, f.obs_traj.flatten(1)], -1), f.actions),
+        }
+
+    def act(self, l_obs, l_goal):
+        steps, n = self.config.num_inference_steps, self.config.num_candidates
+        plans = self.planner.sample(self.repeat_candidates(l_obs), steps)  # (B*N, L_o, D)
+        scores = self.critic_distance(plans[:, -1], self.repeat_candidates(l_goal)).view(-1, n)
+        plans = plans.view(l_obs.shape[0], n, *plans.shape[1:])
+        plan, index = self.select_candidates(plans, scores)
+        action = self.actor.sample(torch.cat([l_obs, plan.flatten(1)], -1), steps)
+        return {"action": action, "distance": scores.amin(1), "obs_plan": plan, "candidate_obs_plans": plans,
+                "candidate_distances": scores, "chosen_candidate": index}
+
+
+class FMAS(EFMAgent):
+    """Critic: U(0,1) | o, g -> d;  Actor: P_src | o -> tau^a;  World: P_src | o, tau^a -> tau^o.
+
+    Inference: num_candidates chunks, each rolled through the world model, keep argmin Critic(0 | tau^o_-1, g).
+    """
+
+    def build_components(self, latent_dim, action_dim):
+        self.actor = self._actor(latent_dim)
+        self.world = self._obs_traj_flow(latent_dim + self.config.action_traj_len * action_dim)
+
+    def losses(self, rows):
+        r, f = rows.goal_conditioned, rows.goal_free
+        return {
+            "critic": self.critic_loss(r),
+            "actor": self.actor.loss(f.obs, f.actions),
+            "world": self.world.loss(torch.cat([f.obs, f.actions.flatten(1)], -1), f.obs_traj),
+        }
+
+    def act(self, l_obs, l_goal):
+        steps, n = self.config.num_inference_steps, self.config.num_candidates
+        obs = self.repeat_candidates(l_obs)
+        chunks = self.actor.sample(obs, steps)  # (B*N, L_a, A)
+        futures = self.world.sample(torch.cat([obs, chunks.flatten(1)], -1), steps)
+        scores = self.critic_distance(futures[:, -1], self.repeat_candidates(l_goal)).view(-1, n)
+        chunks = chunks.view(l_obs.shape[0], n, *chunks.shape[1:])
+        action, index = self.select_candidates(chunks, scores)
+        futures = futures.view(l_obs.shape[0], n, *futures.shape[1:])
+        return {"action": action, "distance": scores.amin(1), "obs_plan": futures[torch.arange(len(index)), index],
+                "candidate_actions": chunks, "candidate_distances": scores, "chosen_candidate": index}
+
+
+AGENTS: dict[str, type[EFMAgent]] = {"gc": FMGC, "ac": FMAC, "pc": FMPC, "ps": FMPS, "as": FMAS}
+
+
+def make_agent(config: EFMConfig, rest_action: Tensor | None = None) -> EFMAgent:
+    return AGENTS[config.agent](config, rest_action)

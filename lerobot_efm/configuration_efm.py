@@ -1,0 +1,288 @@
+"""Configurations of the five Extremum Flow Matching agents (paper Table I) as LeRobot policy types.
+
+``efm_gc``, ``efm_ac``, ``efm_pc``, ``efm_ps`` and ``efm_as`` share every field of :class:`EFMConfig`;
+they differ only in which components they train (Critic, Actor, Planner, World). Defaults follow the
+authors' reference implementation (planar-push trajectory settings, its network sizes and optimiser).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from lerobot.configs import NormalizationMode, PreTrainedConfig
+from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.optim import AdamWConfig
+from lerobot.optim.schedulers import CosineDecayWithWarmupSchedulerConfig
+
+# Batch-key prefixes the hindsight wrapper adds. Each mirrors every ``observation.<key>``:
+GOAL_PREFIX = "observation.goal."  # the hindsight goal g = o_{k+d}
+RL_GOAL_PREFIX = "observation.rl_goal."  # g' drawn from the whole dataset (RL bootstrap, eq. 5)
+TRAJ_PREFIX = "observation.traj."  # the observation trajectory tau^o (L_o frames)
+MIRROR_PREFIXES = (GOAL_PREFIX, RL_GOAL_PREFIX, TRAJ_PREFIX)
+GOAL_DISTANCE_KEY = "observation.goal_distance"  # d, in steps (not normalised by the processor)
+OBS_PREFIX = "observation."
+
+
+def is_mirror_key(key: str) -> bool:
+    return key.startswith(MIRROR_PREFIXES) or key == GOAL_DISTANCE_KEY
+
+
+def mirror_key(key: str, prefix: str) -> str:
+    """``observation.images.front`` -> ``observation.goal.images.front`` (for ``prefix=GOAL_PREFIX``)."""
+    if not key.startswith(OBS_PREFIX) or is_mirror_key(key):
+        raise ValueError(f"{key!r} is not a plain observation key.")
+    return prefix + key[len(OBS_PREFIX) :]
+
+
+@dataclass
+class EFMConfig(PreTrainedConfig):
+    """Shared configuration of the EFM agents. Every field can be set from the CLI as ``--policy.<field>``.
+
+    Trajectories (paper Sec. II-B):
+        obs_traj_len: L_o, number of future observations in the planned trajectory tau^o (incl. the current one).
+        obs_traj_stride: S_o, frames between two observations of tau^o.
+        action_traj_len: L_a, number of actions in the predicted chunk tau^a. Must be divisible by
+            2**len(unet_down_dims) (8 by default) because of the UNet.
+        action_traj_stride: S_a, frames between two actions of tau^a (the chunk is sub-sampled in time).
+        max_goal_distance: L_g, the hindsight goal is d ~ U{0..min(L_g, frames left)} frames ahead; the critic
+            predicts d / L_g.
+        action_mode: "absolute" (position commands: the chunk holds the goal command once the goal is reached)
+            or "velocity" (the chunk becomes zero past the goal), as in the reference.
+
+    Inference:
+        num_inference_steps: Euler steps of every flow integration (reference: 20).
+        critic_inference_eps: the extremum query eps of Critic(eps | o, g); 0 gives the minimum distance.
+        num_candidates: number of sampled plans scored by the critic in FM-PS / FM-AS (rejection sampling).
+        n_action_steps: control steps executed from each predicted chunk before replanning (receding horizon);
+            with action_traj_stride > 1 the chunk is interpolated to the control rate first.
+
+    RL recursive bootstrap (paper eq. 5):
+        use_rl: add rows (o, tau, d + Critic(eps_g | g, g'), g') with g' drawn from the whole dataset.
+        rl_goal_ratio: r_g, eps_g ~ U(0, r_g) (reference: 0.3).
+
+    Training:
+        num_critics: critics trained side by side; every value uses their max (pessimistic for a distance).
+        critic_loss_weight: weight of each critic's flow loss (reference: 0.1).
+        reached_augment_size: rows re-appended with g := o, d := 0 and a "stay" action chunk (reference: 32).
+        trajectory_source: source of the trajectory flows, "unit_ball" (reference) or "gaussian".
+        ema_cutoff: cutoff period (in updates) of the low-pass EMA of all weights; EMA weights are used at
+            inference and saved. ema_warmup_updates: the cutoff ramps up linearly over these first updates.
+
+    Networks:
+        unet_down_dims, unet_time_embed_dim, unet_kernel_size, unet_n_groups: the 1-D UNet actor.
+        mlp_hidden_dims: hidden layers of the MLP flows (critics, planner, world model).
+        image_latent_dim, image_encoder_channels, image_encoder_hidden_dim, image_encoder_dropout: IMPALA-small
+            encoder, one per camera.
+        state_encoder: "identity" (reference) or "mlp" for vector observations; state_latent_dim for "mlp".
+    """
+
+    n_obs_steps: int = 1
+
+    obs_traj_len: int = 3
+    obs_traj_stride: int = 10
+    action_traj_len: int = 8
+    action_traj_stride: int = 1
+    max_goal_distance: int = 600
+    action_mode: str = "absolute"
+
+    num_inference_steps: int = 20
+    critic_inference_eps: float = 0.0
+    num_candidates: int = 64
+    n_action_steps: int = 6
+
+    use_rl: bool = False
+    rl_goal_ratio: float = 0.3
+
+    num_critics: int = 2
+    critic_loss_weight: float = 0.1
+    reached_augment_size: int = 32
+    trajectory_source: str = "unit_ball"
+    ema_cutoff: float = 1000.0
+    ema_warmup_updates: int = 100
+
+    unet_down_dims: tuple[int, ...] = (64, 128, 256)
+    unet_time_embed_dim: int = 32
+    unet_kernel_size: int = 3
+    unet_n_groups: int = 8
+    mlp_hidden_dims: tuple[int, ...] = (1024, 1024, 1024)
+    image_latent_dim: int = 64
+    image_encoder_channels: tuple[int, ...] = (16, 32, 32)
+    image_encoder_hidden_dim: int = 512
+    image_encoder_dropout: float = 0.2
+    state_encoder: str = "identity"
+    state_latent_dim: int = 128
+
+    # LeRobot normalises observations, goals (with the statistics of the observation they mirror) and
+    # actions; MIN_MAX maps positions to [-1, 1] like the reference's raw planar coordinates.
+    normalization_mapping: dict[str, NormalizationMode] = field(
+        default_factory=lambda: {
+            "VISUAL": NormalizationMode.IDENTITY,
+            "STATE": NormalizationMode.MIN_MAX,
+            "ENV": NormalizationMode.MIN_MAX,
+            "ACTION": NormalizationMode.MIN_MAX,
+        }
+    )
+
+    optimizer_lr: float = 1e-4
+    optimizer_betas: tuple[float, float] = (0.9, 0.999)
+    optimizer_weight_decay: float = 1e-6
+    optimizer_grad_clip_norm: float = 1.0
+    scheduler_warmup_steps: int = 100
+    scheduler_decay_steps: int = 200_000
+
+    # Which components the agent trains (Table I); fixed by each registered subclass, not a field.
+    agent: ClassVar[str] = ""
+
+    def __post_init__(self):
+        super().__post_init__()
+        self.unet_down_dims = tuple(self.unet_down_dims)
+        self.mlp_hidden_dims = tuple(self.mlp_hidden_dims)
+        self.image_encoder_channels = tuple(self.image_encoder_channels)
+        checks = {
+            "obs_traj_len": self.obs_traj_len >= 1,
+            "obs_traj_stride": self.obs_traj_stride >= 1,
+            "action_traj_len": self.action_traj_len >= 1,
+            "action_traj_stride": self.action_traj_stride >= 1,
+            "max_goal_distance": self.max_goal_distance >= 1,
+            "num_inference_steps": self.num_inference_steps >= 1,
+            "num_candidates": self.num_candidates >= 1,
+            "num_critics": self.num_critics >= 1,
+            "reached_augment_size": self.reached_augment_size >= 0,
+            "rl_goal_ratio": 0.0 <= self.rl_goal_ratio <= 1.0,
+            "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
+            "n_action_steps": 1 <= self.n_action_steps <= (self.action_traj_len - 1) * self.action_traj_stride + 1,
+        }
+        bad = [name for name, ok in checks.items() if not ok]
+        if bad:
+            raise ValueError(f"Invalid EFM config value(s): {', '.join(f'{n}={getattr(self, n)!r}' for n in bad)}.")
+        multiple = 2 ** len(self.unet_down_dims)
+        if self.action_traj_len % multiple:
+            raise ValueError(
+                f"action_traj_len={self.action_traj_len} must be divisible by {multiple} "
+                f"(2**len(unet_down_dims)) for the UNet actor."
+            )
+        if self.action_mode not in ("absolute", "velocity"):
+            raise ValueError(f"action_mode must be 'absolute' or 'velocity', got {self.action_mode!r}.")
+        if self.trajectory_source not in ("unit_ball", "gaussian"):
+            raise ValueError(f"trajectory_source must be 'unit_ball' or 'gaussian', got {self.trajectory_source!r}.")
+        if self.use_rl and not self.uses_critic:
+            raise ValueError(f"use_rl needs a critic; {type(self).__name__} (FM-GC) has none.")
+
+    # --- agent composition (Table I) ---------------------------------------------------------------
+    @property
+    def uses_critic(self) -> bool:
+        return self.agent in ("ac", "pc", "ps", "as")
+
+    @property
+    def uses_obs_trajectory(self) -> bool:
+        """Planner / world model targets are observation trajectories tau^o."""
+        return self.agent in ("pc", "ps", "as")
+
+    # --- features ----------------------------------------------------------------------------------
+    @property
+    def observation_features(self) -> dict[str, PolicyFeature]:
+        """Input features the agent encodes (the goal and trajectory mirrors excluded)."""
+        return {k: ft for k, ft in self.input_features.items() if not is_mirror_key(k)}
+
+    @property
+    def mirror_prefixes(self) -> tuple[str, ...]:
+        """Mirrored key families the hindsight wrapper produces for this agent."""
+        return (GOAL_PREFIX,) + ((RL_GOAL_PREFIX,) if self.use_rl else ()) + ((TRAJ_PREFIX,) if self.uses_obs_trajectory else ())
+
+    def add_mirror_features(self) -> None:
+        """Declare the goal (and RL goal, trajectory) keys as inputs shaped like the observation they mirror,
+        so LeRobot's normaliser handles them and checkpoints record them."""
+        mirrors = {mirror_key(k, p): ft for p in self.mirror_prefixes for k, ft in self.observation_features.items()}
+        self.input_features = {**self.input_features, **mirrors}
+
+    def validate_features(self) -> None:
+        obs = self.observation_features
+        if not obs:
+            raise ValueError("EFM policies need at least one observation.* input feature; the config has none.")
+        for key, ft in obs.items():
+            if ft.type is FeatureType.VISUAL and len(ft.shape) != 3:
+                raise ValueError(f"Image feature {key!r} must have shape (C, H, W), got {ft.shape}.")
+            if ft.type is not FeatureType.VISUAL and len(ft.shape) != 1:
+                raise ValueError(f"Vector feature {key!r} must have shape (D,), got {ft.shape}.")
+        if "action" not in self.output_features:
+            raise ValueError("EFM policies need an 'action' output feature; the dataset/env provides none.")
+
+    # --- LeRobot hooks -----------------------------------------------------------------------------
+    @property
+    def trajectory_window(self) -> int:
+        """Frames a start needs after it, as in the reference: max(L_o*S_o, L_a*S_a)."""
+        return max(self.obs_traj_len * self.obs_traj_stride, self.action_traj_len * self.action_traj_stride)
+
+    @property
+    def drop_n_last_frames(self) -> int:
+        """Honoured by lerobot-train's EpisodeAwareSampler: start frames leave room for a full window."""
+        return self.trajectory_window
+
+    @property
+    def observation_delta_indices(self) -> None:
+        return None  # the hindsight wrapper fetches exactly the frames it needs
+
+    @property
+    def action_delta_indices(self) -> None:
+        return None
+
+    @property
+    def reward_delta_indices(self) -> None:
+        return None
+
+    def get_optimizer_preset(self) -> AdamWConfig:
+        return AdamWConfig(
+            lr=self.optimizer_lr,
+            betas=self.optimizer_betas,
+            weight_decay=self.optimizer_weight_decay,
+            grad_clip_norm=self.optimizer_grad_clip_norm,
+        )
+
+    def get_scheduler_preset(self) -> CosineDecayWithWarmupSchedulerConfig:
+        return CosineDecayWithWarmupSchedulerConfig(
+            num_warmup_steps=self.scheduler_warmup_steps,
+            num_decay_steps=self.scheduler_decay_steps,
+            peak_lr=self.optimizer_lr,
+            decay_lr=0.0,
+        )
+
+
+@PreTrainedConfig.register_subclass("efm_gc")
+@dataclass
+class EFMGCConfig(EFMConfig):
+    """FM-GC: goal-conditioned flow actor, Actor(P_src | o, g) (imitation baseline, no critic)."""
+
+    agent: ClassVar[str] = "gc"
+
+
+@PreTrainedConfig.register_subclass("efm_ac")
+@dataclass
+class EFMACConfig(EFMConfig):
+    """FM-AC: Critic(0 | o, g) = d~, then Actor(P_src | o, g, d~)."""
+
+    agent: ClassVar[str] = "ac"
+
+
+@PreTrainedConfig.register_subclass("efm_pc")
+@dataclass
+class EFMPCConfig(EFMConfig):
+    """FM-PC: Critic(0 | o, g) = d~, Planner(P_src | o, g, d~) = tau^o, Actor(P_src | o, tau^o)."""
+
+    agent: ClassVar[str] = "pc"
+
+
+@PreTrainedConfig.register_subclass("efm_ps")
+@dataclass
+class EFMPSConfig(EFMConfig):
+    """FM-PS: num_candidates plans from Planner(P_src | o), keep argmin Critic(0 | tau^o_-1, g), Actor(o, tau^o)."""
+
+    agent: ClassVar[str] = "ps"
+
+
+@PreTrainedConfig.register_subclass("efm_as")
+@dataclass
+class EFMASConfig(EFMConfig):
+    """FM-AS: num_candidates chunks from Actor(P_src | o), World(o, tau^a) = tau^o, keep argmin Critic(0 | tau^o_-1, g)."""
+
+    agent: ClassVar[str] = "as"
