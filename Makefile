@@ -1,0 +1,21 @@
+# The two set-up commands of the README: `make demo` (main job) and `make test`.
+PY := .venv/bin/python
+export HF_HUB_OFFLINE := 1
+export MUJOCO_GL := egl
+
+.PHONY: demo test test-slow bench
+
+.venv/.installed: pyproject.toml scripts/setup.sh
+	bash scripts/setup.sh
+
+demo: .venv/.installed
+	$(PY) -m lerobot_efm.demo
+
+test: .venv/.installed
+	$(PY) -m pytest -q
+
+test-slow: .venv/.installed
+	$(PY) -m pytest -q -m slow
+
+bench: .venv/.installed
+	$(PY) benchmarks/bench_agents.py

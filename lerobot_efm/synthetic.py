@@ -1,0 +1,152 @@
+"""Generated *play* data for PointReach, saved as a LeRobot v3 dataset.
+
+A scripted operator wanders between random waypoints with noise, pauses and detours (going
+around the wall through the gap above it), so the recording is goal-free and passes by many
+states. It stores no goals: hindsight relabelling creates them from future states at train time.
+
+CLI: ``python -m lerobot_efm.synthetic --root DIR [--episodes N] [--episode-length L] [--images]``
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot_efm.envs.point_reach import (
+    WALL_TOP, in_wall, move_point, render_scene, sample_free, segment_hits_wall,
+)
+
+FPS = 20
+TASK = "play"
+
+
+def play_features(with_images: bool = False, image_size: int = 64) -> dict:
+    """Dataset features of the play recordings (no goal keys, no rewards)."""
+    feats = {
+        "observation.state": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]},
+        "action": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]},
+    }
+    if with_images:
+        feats["observation.images.top"] = {
+            "dtype": "video", "shape": (image_size, image_size, 3), "names": ["height", "width", "channels"]
+        }
+    return feats
+
+
+def _route(p: np.ndarray, target: np.ndarray, rng: np.random.Generator, wall: bool) -> list[np.ndarray]:
+    """Waypoints from p to target; through the gap above the wall when the straight line is blocked."""
+    if not segment_hits_wall(p, target, wall=wall):
+        return [target]
+    route = []
+    for side in (np.sign(p[0]) or 1.0, np.sign(target[0]) or 1.0):
+        via = np.array([side * rng.uniform(0.08, 0.35), rng.uniform(WALL_TOP + 0.1, 0.85)])
+        if not route or np.sign(route[-1][0]) != side:
+            route.append(via)
+    return route + [target]
+
+
+def _new_leg(p: np.ndarray, rng: np.random.Generator, wall: bool) -> list[np.ndarray]:
+    """Next play leg: a random free target, sometimes reached via a random detour point.
+
+    Targets mostly stay on the current side of the wall: always crossing would over-visit the gap.
+    """
+    target = sample_free(rng, wall)
+    if wall and rng.random() < 0.6 and target[0] * p[0] < 0:
+        target[0] = -target[0]  # mirror onto p's side (free space is symmetric in x)
+    if rng.random() < 0.3:  # detour: a point off the straight line
+        mid = 0.5 * (p + target) + rng.normal(0.0, 0.35, 2)
+        if np.all(np.abs(mid) < 0.95) and not in_wall(mid, 0.05, wall):
+            return _route(p, mid, rng, wall) + _route(mid, target, rng, wall)
+    return _route(p, target, rng, wall)
+
+
+def play_episode(rng: np.random.Generator, length: int, wall: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Simulate one play episode; returns states (length, 2) and commanded positions (length, 2)."""
+    p = sample_free(rng, wall)
+    states, actions = np.empty((length, 2)), np.empty((length, 2))
+    queue: list[np.ndarray] = []
+    pause, budget, speed, drift = 0, 0, 0.04, np.zeros(2)
+    for t in range(length):
+        if pause > 0:  # idle: tiny jitter around the current position
+            pause -= 1
+            cmd = p + rng.normal(0.0, 0.003, 2)
+        else:
+            if not queue:
+                queue, speed = _new_leg(p, rng, wall), rng.uniform(0.015, 0.05)
+                budget = 150
+            delta = queue[0] - p
+            dist = float(np.linalg.norm(delta))
+            budget -= 1
+            if dist < 0.04 or budget <= 0:  # waypoint reached (or hopeless): next one, maybe pause
+                queue.pop(0)
+                budget = 150
+                if rng.random() < 0.2:
+                    pause = int(rng.integers(3, 20))
+            drift = 0.85 * drift + rng.normal(0.0, 0.25, 2)  # smooth heading noise -> curved paths
+            heading = delta / max(dist, 1e-6) + drift
+            heading /= max(float(np.linalg.norm(heading)), 1e-6)
+            cmd = p + heading * min(speed, max(dist, 0.01)) + rng.normal(0.0, 0.004, 2)
+        cmd = np.clip(cmd, -1.0, 1.0)
+        states[t], actions[t] = p, cmd
+        p = move_point(p, cmd, wall)
+    return states, actions
+
+
+def make_point_play_dataset(
+    root: str | Path,
+    repo_id: str = "local/efm_point_play",
+    num_episodes: int = 20,
+    episode_length: int = 200,
+    seed: int = 0,
+    with_images: bool = False,
+    image_size: int = 64,
+    wall: bool = True,
+) -> LeRobotDataset:
+    """Record ``num_episodes`` play episodes into a new dataset at ``root`` (which must not exist).
+
+    Images (``observation.images.top``) use the same renderer as ``PointReachEnv`` observations, so
+    env goal images match dataset frames. Returns the dataset reopened read-only.
+    """
+    if Path(root).exists():  # LeRobot would fail later with a bare mkdir error
+        raise FileExistsError(f"Dataset root {root} already exists; pick a new root or delete it")
+    rng = np.random.default_rng(seed)
+    ds = LeRobotDataset.create(
+        repo_id, fps=FPS, features=play_features(with_images, image_size), root=root, use_videos=with_images
+    )
+    try:
+        for _ in range(num_episodes):
+            states, actions = play_episode(rng, episode_length, wall)
+            for s, a in zip(states.astype(np.float32), actions.astype(np.float32), strict=True):
+                frame = {"observation.state": s, "action": a, "task": TASK}
+                if with_images:
+                    frame["observation.images.top"] = render_scene(s, image_size, wall)
+                ds.add_frame(frame)
+            ds.save_episode()
+    finally:  # keep the already saved episodes readable even if recording failed mid-way
+        if ds.has_pending_frames():
+            ds.clear_episode_buffer()
+        ds.finalize()
+    return LeRobotDataset(repo_id, root=root)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description="Record scripted PointReach play data (LeRobot v3 dataset).")
+    ap.add_argument("--root", required=True, help="output directory (must not exist)")
+    ap.add_argument("--repo-id", default="local/efm_point_play")
+    ap.add_argument("--episodes", type=int, default=20)
+    ap.add_argument("--episode-length", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--images", action="store_true", help="also record observation.images.top (video)")
+    ap.add_argument("--image-size", type=int, default=64)
+    ap.add_argument("--no-wall", action="store_true")
+    args = ap.parse_args(argv)
+    ds = make_point_play_dataset(args.root, args.repo_id, args.episodes, args.episode_length, args.seed,
+                                 args.images, args.image_size, wall=not args.no_wall)
+    print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames")
+
+
+if __name__ == "__main__":
+    main()
