@@ -147,14 +147,13 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
             for prefix, r in rows.items():
                 out[_name(key, prefix)] = _squeeze_single(self.vectors[key][r], prefix)
         flat = sorted({r for rs in rows.values() for r in rs})
-        for key in self.image_keys:
-            frames = dict(zip(flat, self._base.hf_dataset[flat][key], strict=True))
+        for key in [*self.image_keys, *self.video_keys]:
+            decoded = self._decode(key, flat) if key in self.video_keys else self._base.hf_dataset[flat][key]
+            frames = dict(zip(flat, decoded, strict=True))
+            transform = self._base.image_transforms  # LeRobot's --dataset.image_transforms, on every frame used
             for prefix, r in rows.items():
-                out[_name(key, prefix)] = _squeeze_single(torch.stack([frames[i] for i in r]), prefix)
-        for key in self.video_keys:
-            frames = dict(zip(flat, self._decode(key, flat), strict=True))
-            for prefix, r in rows.items():
-                out[_name(key, prefix)] = _squeeze_single(torch.stack([frames[i] for i in r]), prefix)
+                stack = torch.stack([frames[i] for i in r])
+                out[_name(key, prefix)] = _squeeze_single(stack if transform is None else transform(stack), prefix)
         return out
 
     def _decode(self, key: str, rows: list[int]) -> torch.Tensor:

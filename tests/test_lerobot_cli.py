@@ -1,0 +1,121 @@
+"""End to end through LeRobot's own console scripts (lerobot-train, lerobot-eval) in subprocesses,
+plus LeRobot's Hub push path with a recording stand-in for the (unreachable) Hub."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from conftest import EFM_TYPES, REPO_ID
+from safetensors.torch import load_file
+
+from lerobot.policies.factory import get_policy_class
+
+BIN = Path(sys.executable).parent
+REPO = Path(__file__).resolve().parents[1]
+TINY_FLAGS = [
+    "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.max_goal_distance=40", "--policy.obs_traj_stride=4",
+    "--policy.mlp_hidden_dims=[32,32]", "--policy.unet_down_dims=[8,16,16]", "--policy.unet_n_groups=4",
+    "--policy.num_candidates=4", "--policy.num_inference_steps=3", "--policy.reached_augment_size=4",
+    "--wandb.enable=false", "--num_workers=0", "--batch_size=8", "--log_freq=1",
+]
+
+
+def run(cli: str, *args: str, timeout: int = 300) -> subprocess.CompletedProcess:
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.run([str(BIN / cli), *args], capture_output=True, text=True, timeout=timeout, env=env, cwd=REPO)
+    assert proc.returncode == 0, f"{cli} failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-6000:]}"
+    return proc
+
+
+def train(root, out, policy_type, *extra):
+    return run("lerobot-train", f"--policy.type={policy_type}", f"--dataset.repo_id={REPO_ID}", f"--dataset.root={root}",
+               f"--output_dir={out}", *TINY_FLAGS, *extra)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory, state_dataset_root):
+    """One tiny lerobot-train run per agent type (RL bootstrap on for the critic-based ones)."""
+    runs = {}
+    for policy_type in EFM_TYPES:
+        out = tmp_path_factory.mktemp("runs") / policy_type
+        rl = [] if policy_type == "efm_gc" else ["--policy.use_rl=true"]
+        workers = ["--num_workers=2"] if policy_type == "efm_pc" else []  # worker processes pickle the wrapper
+        proc = train(state_dataset_root, out, policy_type, "--steps=3", "--save_freq=3", *rl, *workers)
+        runs[policy_type] = (out / "checkpoints" / "last" / "pretrained_model", proc.stderr + proc.stdout)
+    return runs
+
+
+@pytest.mark.parametrize("policy_type", EFM_TYPES)
+def test_lerobot_train_checkpoint(trained, policy_type):
+    ckpt, log = trained[policy_type]
+    assert "loss_actor" in log  # the policy's own loss terms reached LeRobot's logger
+    config = json.loads((ckpt / "config.json").read_text())
+    assert config["type"] == policy_type and "observation.goal.state" in config["input_features"]
+    weights = load_file(ckpt / "model.safetensors")
+    assert any(k.startswith("ema_model.") for k in weights) and any(k.startswith("model.") for k in weights)
+    stats = load_file(next(ckpt.glob("policy_preprocessor_step_*_normalizer_processor.safetensors")))
+    assert torch.equal(stats["observation.goal.state.min"], stats["observation.state.min"])  # goals use obs stats
+    policy = get_policy_class(policy_type).from_pretrained(ckpt)
+    assert policy.config.use_rl == (policy_type != "efm_gc")
+    for key, value in policy.state_dict().items():
+        assert torch.equal(value, weights[key]), key
+
+
+def test_lerobot_eval_takes_the_goal_from_the_env(trained, tmp_path):
+    ckpt, _ = trained["efm_ac"]
+    run("lerobot-eval", f"--policy.path={ckpt}", "--env.type=efm_point_reach", "--eval.n_episodes=2",
+        "--eval.batch_size=2", "--policy.device=cpu", f"--output_dir={tmp_path}")
+    info = json.loads((tmp_path / "eval_info.json").read_text())
+    assert "pc_success" in info["overall"] and info["overall"]["n_episodes"] == 2
+
+
+def test_resume_continues_the_run(state_dataset_root, tmp_path):
+    out = tmp_path / "run"
+    train(state_dataset_root, out, "efm_ac", "--steps=2", "--save_freq=2")
+    cfg = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+    proc = run("lerobot-train", f"--config_path={cfg}", "--resume=true", "--steps=4")
+    assert "Resuming" in proc.stderr + proc.stdout
+    assert (out / "checkpoints" / "000004" / "pretrained_model" / "model.safetensors").exists()
+    state = json.loads((out / "checkpoints" / "000004" / "training_state" / "training_step.json").read_text())
+    assert state["step"] == 4
+
+
+@pytest.mark.parametrize("config_file", sorted(p.name for p in (REPO / "train_configs").glob("*.json")))
+def test_shipped_train_configs(state_dataset_root, tmp_path, config_file):
+    run("lerobot-train", f"--config_path=train_configs/{config_file}", f"--dataset.root={state_dataset_root}",
+        f"--output_dir={tmp_path / 'run'}", "--steps=2", "--save_freq=2", "--batch_size=8", "--num_workers=0")
+    ckpt = tmp_path / "run" / "checkpoints" / "last" / "pretrained_model"
+    expected = json.loads((REPO / "train_configs" / config_file).read_text())["policy"]["type"]
+    assert json.loads((ckpt / "config.json").read_text())["type"] == expected
+
+
+def test_push_to_hub_goes_through_lerobots_path_with_an_efm_card(trained, tmp_path, monkeypatch):
+    """LeRobot's push_model_to_hub, with HfApi replaced by a stand-in that keeps the uploaded folder."""
+    import shutil
+
+    import lerobot.policies.pretrained as pretrained
+    from lerobot.configs.train import TrainPipelineConfig
+
+    uploaded = tmp_path / "uploaded"
+
+    class RecordingHfApi:
+        def create_repo(self, repo_id, **kwargs):
+            return type("Repo", (), {"repo_id": repo_id})()
+
+        def upload_folder(self, repo_id, folder_path, **kwargs):
+            shutil.copytree(folder_path, uploaded)
+            return type("Commit", (), {"repo_url": type("Url", (), {"url": f"https://hub/{repo_id}"})()})()
+
+    monkeypatch.setattr(pretrained, "HfApi", RecordingHfApi)
+    ckpt, _ = trained["efm_ac"]
+    policy = get_policy_class("efm_ac").from_pretrained(ckpt)
+    policy.config.repo_id = "someone/efm_ac_point"
+    cfg = TrainPipelineConfig.from_pretrained(ckpt)
+    policy.push_model_to_hub(cfg)
+    card = (uploaded / "README.md").read_text()
+    assert "FM-AC-use-RL" in card and "Extremum Flow Matching" in card and REPO_ID in card
+    assert (uploaded / "model.safetensors").exists() and (uploaded / "config.json").exists()
