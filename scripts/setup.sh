@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
 # Creates .venv (Python 3.12, pinned by .python-version) with lerobot 0.6.1 and this plugin installed
-# in editable mode, plus the Debian libraries MuJoCo needs to render offscreen (MUJOCO_GL=egl).
+# in editable mode, plus Debian libraries: EGL/Mesa for MuJoCo's offscreen rendering (MUJOCO_GL=egl) and
+# the FFmpeg 5 shared libraries that torchcodec (LeRobot's video decoder) loads; without them LeRobot falls
+# back to the slower pyav decoder after a long warning.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
   missing=""
-  for pkg in libegl1 libegl-mesa0 libgl1-mesa-dri; do
+  for pkg in libegl1 libegl-mesa0 libgl1-mesa-dri libavutil57 libavcodec59 libavformat59 libavdevice59 \
+    libavfilter8 libswscale6 libswresample4; do
     dpkg -s "$pkg" >/dev/null 2>&1 || missing="$missing $pkg"
   done
   if [ -n "$missing" ]; then
