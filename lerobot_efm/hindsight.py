@@ -77,6 +77,7 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
 
         table = base.hf_dataset.data
         self.episode_index = _column(table, "episode_index").astype(np.int64).reshape(-1)
+        self.frame_index = _column(table, "index").astype(np.int64).reshape(-1)  # absolute, as LeRobot's items
         self.timestamps = _column(table, "timestamp").astype(np.float64).reshape(-1)
         self.task_index = _column(table, "task_index").astype(np.int64).reshape(-1)
         self.vectors = {k: torch.from_numpy(_column(table, k).astype(np.float32)) for k in [*self.vector_keys, "action"]}
@@ -134,7 +135,7 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
             actions = actions * (offsets < d).unsqueeze(-1)
         item["action"] = actions
         item[GOAL_DISTANCE_KEY] = torch.tensor(float(d))
-        item["index"] = torch.tensor(k)
+        item["index"] = torch.tensor(int(self.frame_index[k]))
         item["episode_index"] = torch.tensor(int(self.episode_index[k]))
         item["task_index"] = torch.tensor(int(self.task_index[k]))
         item["task"] = str(self._base.meta.tasks.iloc[int(self.task_index[k])].name)

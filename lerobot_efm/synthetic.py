@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.utils.utils import SuppressProgressBars
 from lerobot_efm.envs.point_reach import (
     WALL_TOP, in_wall, move_point, render_scene, sample_free, segment_hits_wall,
 )
@@ -124,7 +125,8 @@ def make_point_play_dataset(
                 if with_images:
                     frame["observation.images.top"] = render_scene(s, image_size, wall)
                 ds.add_frame(frame)
-            ds.save_episode()
+            with SuppressProgressBars():  # LeRobot shows a "Map" bar per saved episode otherwise
+                ds.save_episode()
     finally:  # keep the already saved episodes readable even if recording failed mid-way
         if ds.has_pending_frames():
             ds.clear_episode_buffer()

@@ -5,10 +5,11 @@ import pickle
 import numpy as np
 import pytest
 import torch
-from conftest import tiny_config
+from conftest import REPO_ID, tiny_config
 from torch.utils.data import DataLoader
 
 from lerobot.datasets import video_utils
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot_efm.hindsight import HindsightGoalDataset, HindsightSpec
 
 
@@ -176,3 +177,11 @@ def test_wrapper_pickles_and_loads_in_worker_processes(state_dataset, rows):
     b = batches[0]
     assert b["action"].shape == (30, 8, 2) and b["observation.traj.state"].shape == (30, 3, 2) and len(b["task"]) == 30
     assert torch.equal(b["observation.state"], rows["observation.state"][b["index"]])
+
+
+def test_index_key_matches_lerobot_on_an_episode_subset(state_dataset_root):
+    """item["index"] is the dataset's absolute frame index, as in LeRobotDataset items."""
+    subset = LeRobotDataset(REPO_ID, root=state_dataset_root, episodes=[1, 2])
+    wrapped = HindsightGoalDataset(subset, tiny_config("efm_ac"))
+    assert torch.equal(wrapped[0]["observation.state"], subset[0]["observation.state"])
+    assert wrapped[0]["index"] == subset[0]["index"]
