@@ -65,3 +65,13 @@ def video_dataset(video_dataset_root):
 @pytest.fixture(autouse=True)
 def _seed():
     torch.manual_seed(0)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _one_thread():
+    """The tests' tiny networks run much faster on one thread than on two competing with other processes
+    (the CLI tests' subprocesses keep their own settings)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)

@@ -10,15 +10,6 @@ from lerobot_efm.agents import Critic
 from lerobot_efm.flow import euler_integrate, flow_matching_loss, interpolate, sample_source, sample_unit_ball
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """Tiny networks run much faster on one thread than on two threads competing with other processes."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 @pytest.mark.parametrize("n", [1, 2, 3])
 def test_unit_ball_is_uniform_in_the_ball(n):
     """Samples lie in the unit ball, radii follow r^(1/n) and directions are isotropic."""

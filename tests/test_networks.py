@@ -10,15 +10,6 @@ from lerobot_efm.networks import (
 )
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """Tiny networks run much faster on one thread than on two threads competing with other processes."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def small_unet(channels=3, cond_dim=5):
     return ConditionalUnet1d(channels, cond_dim, down_dims=(8, 16, 16), n_groups=4)
 
