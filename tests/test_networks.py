@@ -193,3 +193,17 @@ def test_observation_encoder_mlp_size_and_invalid_choice():
     assert enc.latent_dim == 8 + 2 * 12 and enc(observation()).shape == (4, 32)
     with pytest.raises(ValueError, match="state_encoder.*'conv'"):
         observation_encoder("conv")
+
+
+@pytest.mark.parametrize("kernel,stride,padding", [(3, 1, 1), (3, 2, 1), (1, 1, 0)])
+@pytest.mark.parametrize("length", [1, 2, 8, 16])
+def test_temporal_conv_gemm_path_equals_the_convolution(kernel, stride, padding, length):
+    """The small-batch inference path (one GEMM over windows) computes exactly nn.Conv1d."""
+    from lerobot_efm.networks import TemporalConv1d
+
+    conv = TemporalConv1d(6, 5, kernel, stride=stride, padding=padding)
+    x = torch.randn(2, 6, length)
+    with torch.no_grad():
+        fast = conv(x)
+    assert torch.allclose(fast, torch.nn.Conv1d.forward(conv, x), atol=1e-5)
+    assert conv(x).requires_grad  # with gradients the regular convolution runs
