@@ -119,3 +119,13 @@ def test_push_to_hub_goes_through_lerobots_path_with_an_efm_card(trained, tmp_pa
     card = (uploaded / "README.md").read_text()
     assert "FM-AC-use-RL" in card and "Extremum Flow Matching" in card and REPO_ID in card
     assert (uploaded / "model.safetensors").exists() and (uploaded / "config.json").exists()
+
+
+def test_lerobot_train_on_a_video_dataset(video_dataset_root, tmp_path):
+    """Camera frames (o, g and tau^o) are decoded from the videos inside lerobot-train's DataLoader workers."""
+    out = tmp_path / "run"
+    proc = train(video_dataset_root, out, "efm_pc", "--steps=2", "--save_freq=2", "--num_workers=1",
+                 "--policy.image_encoder_channels=[4,8,8]", "--policy.image_encoder_hidden_dim=16", "--policy.image_latent_dim=8")
+    assert "loss_planner" in proc.stderr + proc.stdout
+    config = json.loads((out / "checkpoints" / "last" / "pretrained_model" / "config.json").read_text())
+    assert config["input_features"]["observation.goal.images.top"]["type"] == "VISUAL"
