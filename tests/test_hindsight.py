@@ -185,3 +185,19 @@ def test_index_key_matches_lerobot_on_an_episode_subset(state_dataset_root):
     wrapped = HindsightGoalDataset(subset, tiny_config("efm_ac"))
     assert torch.equal(wrapped[0]["observation.state"], subset[0]["observation.state"])
     assert wrapped[0]["index"] == subset[0]["index"]
+
+
+def test_lerobot_image_transforms_apply_to_every_frame_used(video_dataset_root):
+    """--dataset.image_transforms (LeRobot's augmentation) reaches o, g and tau^o frames, shapes unchanged."""
+    from lerobot.transforms.transforms import ImageTransforms, ImageTransformsConfig
+
+    plain = HindsightGoalDataset(LeRobotDataset(REPO_ID, root=video_dataset_root), tiny_config("efm_pc"))
+    jitter = ImageTransforms(ImageTransformsConfig(enable=True, max_num_transforms=3))
+    augmented = HindsightGoalDataset(LeRobotDataset(REPO_ID, root=video_dataset_root, image_transforms=jitter), tiny_config("efm_pc"))
+    torch.manual_seed(0)
+    a = plain[5]
+    torch.manual_seed(0)
+    b = augmented[5]
+    for key in ("observation.images.top", "observation.goal.images.top", "observation.traj.images.top"):
+        assert a[key].shape == b[key].shape
+        assert not torch.allclose(a[key], b[key]), key
