@@ -1,0 +1,444 @@
+"""Talos kitchen scene, built at run time with ``mujoco.MjSpec`` from example-robot-data.
+
+Nothing is converted or copied into this repository: the ``talos_full_v2`` URDF is located inside
+the installed ``example-robot-data`` wheel (``importlib.metadata``), its ``package://`` URIs are
+rewritten to absolute paths in memory, and the kitchen is added with MjSpec.
+
+Robot (PAL Talos, Apache-2.0 model by PAL Robotics, via example-robot-data 6.0.0):
+
+* **Simplification: fixed base, no whole-body controller.** The real robot balances with a
+  whole-body (SEIKO admittance QP) controller. Here the legs' joints are deleted (rigid legs), the
+  base is welded to the world at z = 1.08305 m (soles on the floor) and every robot body has
+  ``gravcomp = 1``; joint-space position servos stand in for the torque-level controller.
+* 20 position actuators: torso 2 (kp 2000), head 2 (kp 100), arms 2 x 7 (kp 400), grippers 2
+  (kp 20, +-3 N m; the 6 mimic joints per gripper follow through joint equalities). All critically
+  damped (``dampratio = 1``). Armature 0.05 (grippers 0.005). Gripper joint friction lowered from
+  1.0 to 0.1 (with 1.0 the gripper closes at ~0.17 rad/s whatever the force).
+* Robot self-collision is disabled (adjacent URDF collision meshes overlap): robot geoms use
+  ``contype = 2, conaffinity = 1`` and the kitchen ``contype = 1, conaffinity = 3``.
+* URDF collision meshes are moved to geom group 3 (not rendered); visual meshes are group 1.
+* Site ``talos/left_tcp`` (the controlled hand frame) sits between the fingertips, 0.14 m along
+  -z of ``gripper_left_base_link``; the fingers point along the site's -z axis.
+* Gripper joint ``gripper_left_joint``: 0 = open, -0.96 = closed.
+
+Kitchen (world frame: x forward from the robot, y to its left, z up):
+
+* table top at z = 0.85 m, centred at (0.50, -0.12);
+* cabinet (front plane x = 0.42, y in [0.30, 0.70], 1.25 m tall) whose upper compartment is closed
+  by a **hinged door** (``door_hinge``, vertical axis at y = 0.70, range [-2, 0] rad, 0 = closed,
+  negative = open towards the robot; vertical bar handle near (0.36, 0.32, 1.085)) and holds a
+  **pull-out tray** (``tray_slide``, along x, range [-0.28, 0] m, 0 = in, negative = pulled out);
+* a **red pot** (free joint ``pot_free``, hollow, 0.17 m diameter, ~0.8 kg) with two 13 cm bar
+  handles on +-y, standing on the table;
+* one fixed external RGB camera ``front`` framing the robot and the kitchen.
+
+:func:`build_kitchen` returns ``(model, data, handles)``; the compiled model is cached per process
+(per ``image_size``), every call gets a fresh ``MjData`` reset to the home keyframe.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import re
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+BASE_HEIGHT = 1.08305
+ROBOT_PREFIX = "talos/"
+LEFT_ARM_JOINTS = tuple(f"arm_left_{i}_joint" for i in range(1, 8))
+RIGHT_ARM_JOINTS = tuple(f"arm_right_{i}_joint" for i in range(1, 8))
+TORSO_JOINTS = ("torso_1_joint", "torso_2_joint")
+HEAD_JOINTS = ("head_1_joint", "head_2_joint")
+GRIPPER_JOINTS = ("gripper_left_joint", "gripper_right_joint")
+GRIPPER_CLOSED = -0.96  # gripper joint angle when fully closed (0 = open)
+
+# Home posture (rad): left TCP near (0.30, 0.22, 1.0), fingers forward; right arm hanging (unused).
+HOME = {
+    "torso_1_joint": 0.0,
+    "torso_2_joint": 0.0,
+    "head_1_joint": 0.0,
+    "head_2_joint": 0.35,
+    "arm_left_1_joint": 0.7,
+    "arm_left_2_joint": 0.25,
+    "arm_left_3_joint": -1.2,
+    "arm_left_4_joint": -1.2,
+    "arm_left_5_joint": 0.3,
+    "arm_left_6_joint": 0.3,
+    "arm_left_7_joint": -0.6,
+    "arm_right_1_joint": 0.0,
+    "arm_right_2_joint": -0.1,
+    "arm_right_3_joint": 0.0,
+    "arm_right_4_joint": -0.5,
+    "arm_right_5_joint": 0.0,
+    "arm_right_6_joint": 0.0,
+    "arm_right_7_joint": 0.0,
+    "gripper_left_joint": 0.0,
+    "gripper_right_joint": 0.0,
+}
+
+POT_HOME = (0.42, -0.12)  # pot centre on the table (x, y)
+TABLE_TOP = 0.85
+POT_RADIUS = 0.085
+POT_HEIGHT = 0.10
+
+
+def talos_data_dir() -> Path:
+    """Directory ``talos_data`` inside the installed example-robot-data wheel (6.0.0 layout)."""
+    dist = importlib.metadata.distribution("example-robot-data")
+    root = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots/talos_data"))
+    if not (root / "robots" / "talos_full_v2.urdf").is_file():
+        raise FileNotFoundError(f"talos_full_v2.urdf not found under {root} (example-robot-data 6.0.0 expected)")
+    return root
+
+
+def _robot_spec() -> mujoco.MjSpec:
+    root = talos_data_dir()
+    text = (root / "robots" / "talos_full_v2.urdf").read_text()
+    text = re.sub(r"package:///?example-robot-data/robots/talos_data/", str(root) + "/", text)
+    # compiler flags only take effect from inside the URDF (setting them on the spec is too late)
+    text = re.sub(
+        r"(<robot[^>]*>)",
+        r'\1<mujoco><compiler discardvisual="false" fusestatic="false"/></mujoco>',
+        text,
+        count=1,
+    )
+    spec = mujoco.MjSpec.from_string(text)
+
+    for joint in list(spec.joints):
+        if joint.name.startswith("leg_"):
+            spec.delete(joint)
+    for body in spec.bodies:
+        if body.name != "world":
+            body.gravcomp = 1.0
+    for geom in spec.geoms:
+        if geom.contype or geom.conaffinity:  # collision geom
+            geom.contype, geom.conaffinity, geom.group = 2, 1, 3
+            geom.condim = 4 if "gripper" in geom.name or "finger" in (geom.name or "") else 3
+        else:
+            geom.group = 1
+    for joint in spec.joints:
+        is_gripper = joint.name.startswith("gripper_")
+        joint.armature = 0.005 if is_gripper else 0.05
+        if is_gripper:
+            joint.frictionloss = 0.1
+
+    gains = {"torso": 2000.0, "head": 100.0, "arm": 400.0}
+    for name in TORSO_JOINTS + HEAD_JOINTS + LEFT_ARM_JOINTS + RIGHT_ARM_JOINTS + GRIPPER_JOINTS:
+        act = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        if name.startswith("gripper"):
+            act.set_to_position(kp=20.0, dampratio=1.0)
+            act.forcelimited, act.forcerange = True, [-3.0, 3.0]
+            act.ctrllimited, act.ctrlrange = True, [GRIPPER_CLOSED, 0.0]
+        else:
+            act.set_to_position(kp=gains[name.split("_")[0]], dampratio=1.0)
+            act.inheritrange = 1.0
+
+    for side in ("left", "right"):
+        body = spec.body(f"gripper_{side}_base_link")
+        body.add_site(name=f"{side}_tcp", pos=[0, 0, -0.14], size=[0.005, 0, 0], group=4)
+    return spec
+
+
+def _look_at_quat(pos, target) -> np.ndarray:
+    """Quaternion of a MuJoCo camera at ``pos`` looking at ``target`` (camera looks along -z)."""
+    fwd = np.asarray(target, float) - np.asarray(pos, float)
+    fwd /= np.linalg.norm(fwd)
+    x = np.cross(fwd, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(x, fwd)
+    mat = np.stack([x, y, -fwd], axis=1)
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, mat.reshape(-1))
+    return quat
+
+
+def _box(body, name, pos, half, rgba, **kw):
+    return body.add_geom(
+        name=name, type=mujoco.mjtGeom.mjGEOM_BOX, pos=pos, size=half, rgba=rgba,
+        contype=1, conaffinity=3, group=0, **kw,
+    )
+
+
+def _capsule(body, name, p0, p1, radius, rgba, **kw):
+    return body.add_geom(
+        name=name, type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=list(p0) + list(p1), size=[radius, 0, 0],
+        rgba=rgba, contype=1, conaffinity=3, group=0, **kw,
+    )
+
+
+WOOD = [0.62, 0.45, 0.30, 1]
+WHITE = [0.85, 0.85, 0.82, 1]
+METAL = [0.55, 0.55, 0.6, 1]
+RED = [0.8, 0.1, 0.1, 1]
+
+
+def _add_kitchen(spec: mujoco.MjSpec) -> None:
+    world = spec.worldbody
+    spec.option.timestep = 0.002
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.impratio = 10.0
+    spec.visual.quality.shadowsize = 0
+    spec.visual.quality.offsamples = 0
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+
+    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.05],
+                   rgba=[0.55, 0.55, 0.5, 1], contype=1, conaffinity=3)
+    world.add_geom(name="wall", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[1.05, 0.2, 1.2], size=[0.02, 1.5, 1.2],
+                   rgba=[0.8, 0.82, 0.86, 1], contype=0, conaffinity=0)
+    world.add_light(name="top", pos=[0.4, 0.0, 2.8], dir=[0, 0, -1], castshadow=False,
+                    diffuse=[0.5, 0.5, 0.5])
+
+    # table
+    table = world.add_body(name="table", pos=[0.50, -0.12, 0.0])
+    _box(table, "table_top", [0, 0, TABLE_TOP - 0.02], [0.22, 0.30, 0.02], WOOD)
+    for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
+        _box(table, f"table_leg{i}", [sx * 0.19, sy * 0.27, (TABLE_TOP - 0.04) / 2], [0.02, 0.02, (TABLE_TOP - 0.04) / 2],
+             WOOD)
+
+    # cabinet: front plane x = 0.42, y in [0.30, 0.70], depth 0.40, height 1.25
+    x0, x1, y0, y1, h, t = 0.42, 0.82, 0.30, 0.70, 1.25, 0.02
+    cab = world.add_body(name="cabinet")
+    xm, ym = (x0 + x1) / 2, (y0 + y1) / 2
+    _box(cab, "cab_lower", [xm, ym, 0.45], [(x1 - x0) / 2, (y1 - y0) / 2, 0.45], WHITE)  # solid base to 0.90
+    _box(cab, "cab_shelf", [xm, ym, 0.91], [(x1 - x0) / 2, (y1 - y0) / 2, 0.01], WHITE)   # floor of compartment 0.92
+    _box(cab, "cab_top", [xm, ym, h - t / 2], [(x1 - x0) / 2, (y1 - y0) / 2, t / 2], WHITE)
+    _box(cab, "cab_back", [x1 - t / 2, ym, (0.92 + h) / 2], [t / 2, (y1 - y0) / 2, (h - 0.92) / 2], WHITE)
+    _box(cab, "cab_side_r", [xm, y0 + t / 2, (0.92 + h) / 2], [(x1 - x0) / 2, t / 2, (h - 0.92) / 2], WHITE)
+    _box(cab, "cab_side_l", [xm, y1 - t / 2, (0.92 + h) / 2], [(x1 - x0) / 2, t / 2, (h - 0.92) / 2], WHITE)
+
+    # hinged door in front of the compartment, hinge at the +y edge
+    door = cab.add_body(name="door", pos=[x0 - 0.013, y1 - 0.005, 1.085])
+    door.add_joint(name="door_hinge", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1], range=[-2.0, 0.0],
+                   limited=True, damping=0.3, frictionloss=0.05, armature=0.01)
+    _box(door, "door_panel", [0, -0.195, 0], [0.01, 0.19, 0.16], WOOD, mass=2.0)
+    hy = 0.32 - (y1 - 0.005)  # handle y offset in the door frame
+    hx = 0.36 - (x0 - 0.013)
+    _capsule(door, "door_handle", [hx, hy, -0.06], [hx, hy, 0.06], 0.011, METAL, mass=0.05)
+    for i, z in enumerate((-0.06, 0.06)):
+        _capsule(door, f"door_handle_arm{i}", [-0.01, hy, z], [hx, hy, z], 0.007, METAL, mass=0.02)
+
+    # pull-out tray in the compartment (slides along x towards the robot)
+    tray = cab.add_body(name="tray", pos=[0.63, ym, 0.925])
+    tray.add_joint(name="tray_slide", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0], range=[-0.28, 0.0],
+                   limited=True, damping=3.0, frictionloss=0.2, armature=0.01)
+    _box(tray, "tray_bottom", [0, 0, 0.004], [0.16, 0.17, 0.004], METAL, mass=0.6)
+    _box(tray, "tray_front", [-0.155, 0, 0.03], [0.005, 0.17, 0.03], METAL, mass=0.1)
+    _box(tray, "tray_rear", [0.155, 0, 0.03], [0.005, 0.17, 0.03], METAL, mass=0.1)
+    for i, s in enumerate((-1, 1)):
+        _box(tray, f"tray_side{i}", [0, s * 0.165, 0.03], [0.16, 0.005, 0.03], METAL, mass=0.1)
+    thx = -0.19  # handle bar 3.5 cm in front of the tray front
+    _capsule(tray, "tray_handle", [thx, -0.07, 0.045], [thx, 0.07, 0.045], 0.01, METAL, mass=0.05)
+    for i, y in enumerate((-0.07, 0.07)):
+        _capsule(tray, f"tray_handle_arm{i}", [-0.16, y, 0.045], [thx, y, 0.045], 0.006, METAL, mass=0.02)
+
+    # red pot with two bar handles on +-y
+    pot = world.add_body(name="pot", pos=[POT_HOME[0], POT_HOME[1], TABLE_TOP + 0.001])
+    pot.add_freejoint(name="pot_free")
+    pot.add_geom(name="pot_bottom", type=mujoco.mjtGeom.mjGEOM_CYLINDER, pos=[0, 0, 0.005],
+                 size=[POT_RADIUS, 0.005, 0], rgba=RED, mass=0.25, contype=1, conaffinity=3)
+    n_seg = 16
+    seg_half = POT_RADIUS * np.tan(np.pi / n_seg) + 0.001
+    for i in range(n_seg):
+        a = 2 * np.pi * i / n_seg
+        quat = [np.cos(a / 2), 0, 0, np.sin(a / 2)]
+        pot.add_geom(name=f"pot_wall{i}", type=mujoco.mjtGeom.mjGEOM_BOX,
+                     pos=[POT_RADIUS * np.cos(a), POT_RADIUS * np.sin(a), 0.011 + POT_HEIGHT / 2], quat=quat,
+                     size=[0.003, seg_half, POT_HEIGHT / 2], rgba=RED, mass=0.025, contype=1, conaffinity=3)
+    for side, s in (("left", 1), ("right", -1)):
+        yb = s * (POT_RADIUS + 0.065)
+        z = POT_HEIGHT - 0.01
+        pot.add_geom(name=f"pot_handle_{side}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                     fromto=[-0.065, yb, z, 0.065, yb, z], size=[0.009, 0, 0], rgba=[0.15, 0.15, 0.15, 1],
+                     mass=0.05, contype=1, conaffinity=3)
+        for j, x in enumerate((-0.065, 0.065)):
+            pot.add_geom(name=f"pot_handle_{side}_arm{j}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                         fromto=[x, s * (POT_RADIUS * 0.7), z, x, yb, z], size=[0.006, 0, 0],
+                         rgba=[0.15, 0.15, 0.15, 1], mass=0.02, contype=1, conaffinity=3)
+
+    cam_pos = [-0.35, 1.30, 1.85]
+    world.add_camera(name="front", pos=cam_pos, quat=_look_at_quat(cam_pos, [0.40, 0.05, 0.95]), fovy=55.0)
+
+
+@dataclass(frozen=True)
+class KitchenHandles:
+    """Indices into the compiled model used by the controller and the env."""
+
+    arm_qpos: np.ndarray      # qpos addresses of the 7 left-arm joints
+    arm_dof: np.ndarray       # dof addresses of the same joints
+    torso_qpos: np.ndarray
+    torso_dof: np.ndarray
+    actuator: dict            # joint name (unprefixed) -> actuator id
+    home_qpos: np.ndarray     # full qpos of the home keyframe
+    left_tcp: int             # site id of the controlled hand frame
+    left_gripper_body: int
+    left_gripper_qpos: int
+    door_qpos: int
+    tray_qpos: int
+    pot_qpos: int             # start of the pot's 7 free-joint qpos (pos, quat)
+    pot_body: int
+    pot_weld: int             # id of the (initially inactive) hand-pot weld equality
+    camera: int               # id of the "front" camera
+    finger_geoms_a: frozenset  # collision geoms of fingertips 1-2 (one finger side)
+    finger_geoms_b: frozenset  # collision geoms of fingertip 3 (the opposite side)
+    pot_geoms: frozenset
+
+
+def _compile(image_size: int) -> tuple[mujoco.MjModel, KitchenHandles]:
+    spec = mujoco.MjSpec()
+    spec.modelname = "talos_kitchen"
+    _add_kitchen(spec)
+    frame = spec.worldbody.add_frame(pos=[0, 0, BASE_HEIGHT])
+    spec.attach(_robot_spec(), frame=frame, prefix=ROBOT_PREFIX)
+    # weld-on-contact grasp simplification for the pot (see control.PotWeld); inactive by default
+    spec.add_equality(name="pot_weld", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                      name1=ROBOT_PREFIX + "gripper_left_base_link", name2="pot", active=False)
+    spec.visual.global_.offwidth = max(int(image_size), 640)
+    spec.visual.global_.offheight = max(int(image_size), 480)
+    model = spec.compile()
+
+    def jid(n):
+        return model.joint(ROBOT_PREFIX + n).id
+
+    arm = [jid(n) for n in LEFT_ARM_JOINTS]
+    torso = [jid(n) for n in TORSO_JOINTS]
+    home = model.qpos0.copy()
+    for n, v in HOME.items():
+        home[model.jnt_qposadr[jid(n)]] = v
+    actuator = {n: model.actuator(ROBOT_PREFIX + n).id for n in HOME}
+
+    def geoms_of(prefixes):
+        out = set()
+        for g in range(model.ngeom):
+            b = model.body(model.geom_bodyid[g]).name
+            if model.geom_contype[g] and any(b == ROBOT_PREFIX + p for p in prefixes):
+                out.add(g)
+        return frozenset(out)
+
+    pot_body = model.body("pot").id
+    handles = KitchenHandles(
+        arm_qpos=model.jnt_qposadr[arm].copy(),
+        arm_dof=model.jnt_dofadr[arm].copy(),
+        torso_qpos=model.jnt_qposadr[torso].copy(),
+        torso_dof=model.jnt_dofadr[torso].copy(),
+        actuator=actuator,
+        home_qpos=home,
+        left_tcp=model.site(ROBOT_PREFIX + "left_tcp").id,
+        left_gripper_body=model.body(ROBOT_PREFIX + "gripper_left_base_link").id,
+        left_gripper_qpos=int(model.jnt_qposadr[jid("gripper_left_joint")]),
+        door_qpos=int(model.jnt_qposadr[model.joint("door_hinge").id]),
+        tray_qpos=int(model.jnt_qposadr[model.joint("tray_slide").id]),
+        pot_qpos=int(model.jnt_qposadr[model.joint("pot_free").id]),
+        pot_body=pot_body,
+        pot_weld=model.equality("pot_weld").id,
+        camera=model.camera("front").id,
+        finger_geoms_a=geoms_of(["gripper_left_fingertip_1_link", "gripper_left_fingertip_2_link"]),
+        finger_geoms_b=geoms_of(["gripper_left_fingertip_3_link"]),
+        pot_geoms=frozenset(g for g in range(model.ngeom) if model.geom_bodyid[g] == pot_body),
+    )
+    return model, handles
+
+
+@lru_cache(maxsize=4)
+def _cached(image_size: int):
+    return _compile(image_size)
+
+
+def reset_kitchen(model: mujoco.MjModel, data: mujoco.MjData, handles: KitchenHandles) -> None:
+    """Home posture, door closed, tray in, pot on the table; actuator targets = home."""
+    mujoco.mj_resetData(model, data)
+    data.qpos[:] = handles.home_qpos
+    for name, act in handles.actuator.items():
+        data.ctrl[act] = HOME[name]
+    data.eq_active[handles.pot_weld] = 0
+    mujoco.mj_forward(model, data)
+
+
+def build_kitchen(image_size: int = 128) -> tuple[mujoco.MjModel, mujoco.MjData, KitchenHandles]:
+    """Compiled kitchen model (cached per process and ``image_size``), a fresh reset ``MjData``, handles.
+
+    The model is shared between calls: treat it as read-only.
+    """
+    model, handles = _cached(int(image_size))
+    data = mujoco.MjData(model)
+    reset_kitchen(model, data, handles)
+    return model, data, handles
+
+
+# ----------------------------------------------------------------------------------------- state
+
+
+def door_angle(data: mujoco.MjData, handles: KitchenHandles) -> float:
+    """Door hinge angle (rad): 0 closed, down to -2 fully open."""
+    return float(data.qpos[handles.door_qpos])
+
+
+def tray_slide(data: mujoco.MjData, handles: KitchenHandles) -> float:
+    """Tray slide (m): 0 pushed in, down to -0.28 pulled out."""
+    return float(data.qpos[handles.tray_qpos])
+
+
+def pot_pose(data: mujoco.MjData, handles: KitchenHandles) -> tuple[np.ndarray, np.ndarray]:
+    """Pot position (3,) of its base centre and unit quaternion (4,) ``w, x, y, z`` in the world frame."""
+    a = handles.pot_qpos
+    return data.qpos[a : a + 3].copy(), data.qpos[a + 3 : a + 7].copy()
+
+
+def gripper_opening(data: mujoco.MjData, handles: KitchenHandles) -> float:
+    """Measured left gripper closure in [0, 1] (0 open, 1 closed)."""
+    return float(np.clip(data.qpos[handles.left_gripper_qpos] / GRIPPER_CLOSED, 0.0, 1.0))
+
+
+# ----------------------------------------------------------------------------------------- render
+
+
+class KitchenRenderer:
+    """Reusable offscreen renderer of the ``front`` camera (EGL/OSMesa; set MUJOCO_GL before import).
+
+    Fast settings: no shadows, no MSAA (``offsamples = 0``), no reflections; collision meshes hidden.
+    """
+
+    def __init__(self, model: mujoco.MjModel, height: int = 128, width: int | None = None,
+                 camera: str = "front"):
+        self.model = model
+        self.camera = camera
+        self._renderer = mujoco.Renderer(model, height=height, width=width or height)
+        self._opt = mujoco.MjvOption()
+        self._opt.geomgroup[:] = [1, 1, 1, 0, 0, 0]
+        self._opt.sitegroup[:] = 0
+
+    def render(self, data: mujoco.MjData) -> np.ndarray:
+        """(H, W, 3) uint8 RGB image (a new array)."""
+        self._renderer.update_scene(data, camera=self.camera, scene_option=self._opt)
+        return self._renderer.render().copy()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def render(model: mujoco.MjModel, data: mujoco.MjData, renderer: KitchenRenderer | None = None,
+           image_size: int = 128) -> np.ndarray:
+    """Render the ``front`` camera; pass a :class:`KitchenRenderer` to reuse its GL context."""
+    if renderer is None:
+        with KitchenRenderer(model, image_size) as r:
+            return r.render(data)
+    return renderer.render(data)
