@@ -1,0 +1,1 @@
+"""Command-line scripts of lerobot_efm (rerun rollouts and dataset logging)."""

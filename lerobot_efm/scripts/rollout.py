@@ -1,0 +1,218 @@
+"""Roll a trained policy out in an env and record everything to a rerun ``.rrd`` file (no viewer).
+
+    python -m lerobot_efm.scripts.rollout --policy.path=outputs/train/.../pretrained_model \\
+        --env.type=efm_point_reach --env.task=around_wall --n_episodes=2 --output=rollout.rrd
+    rerun rollout.rrd        # view it later, anywhere
+
+The loop is lerobot-eval's (``preprocess_observation`` -> env preprocessor -> policy preprocessor ->
+``select_action`` -> postprocessor -> env postprocessor -> ``env.step``) with one env, synchronously. What
+is logged is described in :mod:`lerobot_efm.viz.rollout_log`.
+"""
+
+
+import logging
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import lerobot_efm  # noqa: F401  (registers the efm_* policies and envs)
+from lerobot import envs as lerobot_envs
+from lerobot.configs import parser
+from lerobot.configs.policies import PreTrainedConfig
+from lerobot.utils.constants import ACTION
+
+from ..viz.rollout_log import RolloutLogger
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class RolloutConfig:
+    env: lerobot_envs.EnvConfig
+    policy: PreTrainedConfig | None = None
+    # The .rrd file written.
+    output: Path = Path("outputs/rollout.rrd")
+    n_episodes: int = 1
+    seed: int = 1000
+    # Stop an episode after this many steps (default: the env's own limit).
+    max_steps: int | None = None
+    # Log env.render() frames too (an extra camera).
+    render: bool = True
+    application_id: str = "lerobot_efm_rollout"
+
+    def __post_init__(self) -> None:
+        # As lerobot's EvalPipelineConfig: --policy.path is removed by parser.wrap and read here.
+        policy_path = parser.get_path_arg("policy")
+        if policy_path:
+            overrides = parser.get_yaml_overrides("policy") + (parser.get_cli_overrides("policy") or [])
+            self.policy = PreTrainedConfig.from_pretrained(policy_path, cli_overrides=overrides)
+            self.policy.pretrained_path = Path(policy_path)
+        if self.policy is None or getattr(self.policy, "pretrained_path", None) is None:
+            raise ValueError("Give the trained policy with --policy.path=<checkpoint>/pretrained_model.")
+        if self.n_episodes < 1:
+            raise ValueError(f"n_episodes must be >= 1, got {self.n_episodes}.")
+
+    @classmethod
+    def __get_path_fields__(cls) -> list[str]:
+        return ["policy"]
+
+
+def _success(info: dict) -> bool:
+    """``is_success`` of env 0 of a vector env, from ``final_info`` when the env auto-reset (as lerobot_eval)."""
+    source = info.get("final_info", info) if "final_info" in info else info
+    if isinstance(source, dict):
+        value = source.get("is_success", False)
+    else:  # gymnasium < 1.0: a sequence of per-env dicts
+        item = source[0] if len(source) else None
+        value = item.get("is_success", False) if isinstance(item, dict) else False
+    return bool(np.asarray(value).reshape(-1)[0]) if np.asarray(value).size else False
+
+
+def _env0_info(info: dict) -> dict:
+    """Per-env info of env 0 (final_info when the episode just ended), as scalars."""
+    source = info.get("final_info", info)
+    if not isinstance(source, dict):
+        return {}
+    out = {}
+    for key, value in source.items():
+        if key.startswith("_") or isinstance(value, dict):
+            continue
+        v = np.asarray(value)
+        if v.dtype.kind in "fiub" and v.ndim == 1 and v.size >= 1:
+            out[key] = v[0]
+    return out
+
+
+def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, postprocessor, log: RolloutLogger,
+                index: int, seed: int, max_steps: int, render: bool) -> dict:
+    """One episode in env 0 of a (1-env) vector env, as lerobot_eval's rollout, logging every step."""
+    from lerobot.envs.utils import NEW_ROLLOUT_OPTION, preprocess_observation
+
+    policy.reset()
+    observation, info = env.reset(seed=[seed], options={NEW_ROLLOUT_OPTION: True})
+    try:
+        task = list(env.call("task_description"))
+    except (AttributeError, NotImplementedError):
+        try:
+            task = list(env.call("task"))
+        except (AttributeError, NotImplementedError):
+            task = [""]
+    log.begin_episode(index, task=task[0], seed=seed)
+    step, success, done, reward_sum = 0, False, False, 0.0
+    while not done and step < max_steps:
+        obs = preprocess_observation(observation)
+        obs["task"] = task
+        obs = env_preprocessor(obs)
+        log.log_observation(step, obs)
+        if render:
+            log.log_render(step, env.call("render")[0])
+        before = getattr(policy, "last_prediction", None)
+        batch = preprocessor(dict(obs))
+        with torch.inference_mode():
+            action = policy.select_action(batch)
+        prediction = getattr(policy, "last_prediction", None)
+        if prediction is not None and prediction is not before:  # the action queue was empty: replanned
+            log.log_prediction(step, prediction)
+        action = postprocessor(action)
+        action = env_postprocessor({ACTION: action})[ACTION]
+        action_np = action.to("cpu").numpy()
+        log.log_action(step, action_np[0])
+        observation, reward, terminated, truncated, info = env.step(action_np)
+        success = _success(info)
+        reward_sum += float(reward[0])
+        log.log_outcome(step, float(reward[0]), success, _env0_info(info))
+        done = bool(terminated[0] or truncated[0])
+        step += 1
+        if not done:
+            continue
+        final = info.get("final_obs")  # autoreset SAME_STEP: `observation` already belongs to the next episode
+        if final is not None:
+            try:
+                final_obs = final[0] if not isinstance(final, dict) else {k: v[0] for k, v in final.items()}
+                batched = {k: (v[None] if isinstance(v, np.ndarray) else {c: im[None] for c, im in v.items()})
+                           for k, v in final_obs.items()}
+                log.log_observation(step, env_preprocessor(preprocess_observation(batched)))
+            except Exception as e:  # noqa: BLE001  (env-specific final observations: only a nicety)
+                logger.debug("final observation not logged: %s", e)
+    if not done:  # stopped by max_steps: log where it ended
+        obs = env_preprocessor(preprocess_observation(observation))
+        log.log_observation(step, obs)
+    log.end_episode(step, success)
+    return {"episode": index, "seed": seed, "length": step, "success": success, "sum_reward": reward_sum, "task": task[0]}
+
+
+def rollout(cfg: RolloutConfig) -> list[dict]:
+    """Build env, policy and processors like lerobot-eval, run ``cfg.n_episodes`` and save ``cfg.output``."""
+    import rerun as rr
+
+    from lerobot.envs.factory import make_env, make_env_pre_post_processors
+    from lerobot.policies import make_policy, make_pre_post_processors
+    from lerobot.utils.random_utils import set_seed
+
+    set_seed(cfg.seed)
+    env_dict = make_env(cfg.env, n_envs=1, use_async_envs=False)
+    env = next(iter(next(iter(env_dict.values())).values()))
+    policy = make_policy(cfg=cfg.policy, env_cfg=cfg.env)
+    policy.eval()
+    preprocessor, postprocessor = make_pre_post_processors(
+        policy_cfg=cfg.policy, pretrained_path=cfg.policy.pretrained_path,
+        preprocessor_overrides={"device_processor": {"device": str(policy.config.device)}},
+    )
+    env_preprocessor, env_postprocessor = make_env_pre_post_processors(env_cfg=cfg.env, policy_cfg=cfg.policy)
+
+    env_limit = int(env.call("_max_episode_steps")[0] or 10**9)
+    max_steps = min(env_limit, cfg.max_steps) if cfg.max_steps else env_limit
+    fps = cfg.env.fps or env.unwrapped.metadata.get("render_fps", 30)
+
+    output = Path(cfg.output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(cfg.application_id)
+    rec.save(output)
+    rec.send_recording_name(f"{cfg.policy.type} in {cfg.env.type}")
+    log = RolloutLogger(rec, cfg.env.type, fps, policy, preprocessor, postprocessor)
+    results = []
+    try:
+        with torch.no_grad():
+            for i in range(cfg.n_episodes):
+                results.append(run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, postprocessor,
+                                           log, i, cfg.seed + i, max_steps, cfg.render))
+                logger.info("episode %d: %s", i, results[-1])
+        rec.send_blueprint(log.blueprint())
+    finally:
+        rec.flush()
+        rec.disconnect()
+        env.close()
+    return results
+
+
+@parser.wrap()
+def rollout_main(cfg: RolloutConfig) -> list[dict]:
+    results = rollout(cfg)
+    n_success = sum(r["success"] for r in results)
+    print(f"Wrote {cfg.output}: {len(results)} episode(s), {n_success} success(es); "
+          f"lengths {[r['length'] for r in results]}. View it with: rerun {cfg.output}")
+    return results
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    """Console entry point; ``main([...])`` runs in-process with those CLI arguments."""
+    from lerobot.utils.import_utils import register_third_party_plugins
+    from lerobot.utils.utils import init_logging
+
+    init_logging()
+    register_third_party_plugins()
+    if argv is None:
+        return rollout_main()
+    saved = sys.argv
+    sys.argv = [saved[0] if saved else "rollout", *argv]  # parser.wrap and get_path_arg read sys.argv
+    try:
+        return rollout_main()
+    finally:
+        sys.argv = saved
+
+
+if __name__ == "__main__":
+    main()

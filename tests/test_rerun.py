@@ -1,0 +1,154 @@
+"""Rerun recordings: policy rollouts (lerobot_efm.scripts.rollout) and hindsight samples
+(lerobot_efm.scripts.log_dataset) written to .rrd files, then read back with rerun's own reader."""
+
+import numpy as np
+import pytest
+import rerun as rr
+import torch
+from conftest import REPO_ID
+from rerun.experimental import RrdReader
+from test_lerobot_cli import train
+
+from lerobot_efm.scripts import log_dataset, rollout
+from lerobot_efm.viz import RolloutLogger, read_rrd
+
+
+@pytest.fixture(scope="module")
+def checkpoints(tmp_path_factory, state_dataset_root):
+    """Tiny lerobot-train runs (2 steps) of a critic agent (FM-AC) and a candidate-sampling one (FM-PS)."""
+    out = {}
+    for policy_type in ("efm_ac", "efm_ps"):
+        run_dir = tmp_path_factory.mktemp("rerun_runs") / policy_type
+        train(state_dataset_root, run_dir, policy_type, "--steps=2", "--save_freq=2", "--policy.use_rl=true")
+        out[policy_type] = run_dir / "checkpoints" / "last" / "pretrained_model"
+    return out
+
+
+def temporal(rows, timeline="step"):
+    return [r for r in rows if r.get(timeline) is not None]
+
+
+def scalars(rows):
+    return np.array([r["Scalars:scalars"] for r in temporal(rows)], dtype=np.float64)
+
+
+def check_episode(data, i, length, n_action_steps, num_candidates=None):
+    ep = f"episode_{i}"
+    for name in ("reward", "success", "action", "info/distance", "camera/render"):  # one row per env step, steps 0..length-1
+        assert [r["step"] for r in temporal(data[f"{ep}/{name}"])] == list(range(length)), name
+    # observations: every step plus the final observation
+    for name in ("world/agent", "obs/state", "goal_obs/state"):
+        assert [r["step"] for r in temporal(data[f"{ep}/{name}"])] == list(range(length + 1)), name
+    assert len(temporal(data[f"{ep}/world/goal_agent"])) == length + 1
+    path = temporal(data[f"{ep}/world/agent_path"])[-1]["LineStrips3D:strips"][0]
+    assert len(path) == length + 1 and all(p[2] == 0.0 for p in path)  # 2-D state padded with z = 0
+
+    replans = list(range(0, length, n_action_steps))
+    critic = temporal(data[f"{ep}/distance/critic"])
+    assert [r["step"] for r in critic] == replans
+    assert np.isfinite(scalars(data[f"{ep}/distance/critic"])).all()
+    chunks = sorted(k for k in data if k.startswith(f"{ep}/action_chunk/"))
+    assert chunks == [f"{ep}/action_chunk/r{t:04d}" for t in replans]
+    chunk = scalars(data[chunks[0]])
+    assert chunk.shape == (8, 2) and np.isfinite(chunk).all()  # L_a waypoints x action dims, unnormalised
+    strips = temporal(data[f"{ep}/world/action_chunk"])
+    assert [r["step"] for r in strips] == replans
+    assert np.isfinite(np.array(strips[0]["LineStrips3D:strips"][0])).all()
+    if num_candidates is not None:
+        cands = temporal(data[f"{ep}/world/candidates"])
+        assert [r["step"] for r in cands] == replans
+        for row in cands:
+            assert len(row["LineStrips3D:strips"]) == num_candidates
+            radii = np.array(row["LineStrips3D:radii"])
+            assert (radii == radii.max()).sum() == 1  # the chosen candidate is highlighted
+            assert np.isfinite(np.array(row["LineStrips3D:strips"], dtype=np.float64)).all()
+        assert scalars(data[f"{ep}/distance/candidates"]).shape == (len(replans), num_candidates)
+        assert len(temporal(data[f"{ep}/world/obs_plan"])) == len(replans)
+
+
+@pytest.mark.parametrize(
+    "policy_type, limit, num_candidates",
+    [("efm_ac", "--env.episode_length=25", None), ("efm_ps", "--max_steps=20", 4)],
+)
+def test_rollout_rrd(checkpoints, tmp_path, policy_type, limit, num_candidates):
+    output = tmp_path / "rollout.rrd"
+    results = rollout.main([f"--policy.path={checkpoints[policy_type]}", "--env.type=efm_point_reach", "--n_episodes=2",
+                            f"--output={output}", "--seed=3", limit])
+    assert len(results) == 2 and output.exists()
+    data = read_rrd(output)
+    expected = 25 if "episode_length" in limit else 20  # untrained policies do not reach the goal
+    for i, res in enumerate(results):
+        assert res["length"] == expected and res["seed"] == 3 + i
+        check_episode(data, i, res["length"], n_action_steps=6, num_candidates=num_candidates)
+    assert "scene/wall" in data and "scene/arena" in data
+    reader = RrdReader(output)
+    assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1  # the default layout travels with it
+
+
+def test_success_backfills_true_remaining_steps(tmp_path):
+    """The logger alone: images, goals and the true steps left, back-filled once an episode succeeded."""
+    output = tmp_path / "log.rrd"
+    rec = rr.RecordingStream("test")
+    rec.save(output)
+    log = RolloutLogger(rec, "efm_point_reach", fps=20)
+    log.begin_episode(0)
+    img = torch.rand(1, 3, 8, 8)
+    for t in range(5):
+        log.log_observation(t, {"observation.state": torch.tensor([[0.1 * t, 0.2]]), "observation.goal.state": torch.tensor([[0.5, 0.2]]),
+                                "observation.images.top": img, "observation.goal.images.top": img})
+        if t == 0:
+            log.log_prediction(t, {"distance": torch.tensor([5.0])})
+        log.log_action(t, np.array([0.1 * (t + 1), 0.2]))
+        log.log_outcome(t, float(t == 4), t == 4, {"distance": 0.5 - 0.1 * t})
+    log.end_episode(5, True)
+    rec.send_blueprint(log.blueprint())
+    rec.flush()
+    rec.disconnect()
+    data = read_rrd(output)
+    remaining = temporal(data["episode_0/distance/true_remaining"])
+    assert [r["step"] for r in remaining] == list(range(6))
+    assert [r["Scalars:scalars"][0] for r in remaining] == [5.0, 4.0, 3.0, 2.0, 1.0, 0.0]
+    assert temporal(data["episode_0/distance/critic"])[0]["Scalars:scalars"] == [5.0]
+    assert len(temporal(data["episode_0/camera/top"])) == 5 and len(temporal(data["episode_0/goal/top"])) == 5
+    assert temporal(data["episode_0/success"])[-1]["Scalars:scalars"] == [1.0]
+    first = temporal(data["episode_0/reward"])[1]
+    assert first["time"].total_seconds() == pytest.approx(1 / 20)  # seconds timeline from the env fps
+
+
+@pytest.mark.parametrize("policy_type", ["efm_ps", "efm_ac"])
+def test_log_dataset_rrd(state_dataset, state_dataset_root, tmp_path, policy_type):
+    output = tmp_path / "samples.rrd"
+    logged = log_dataset.main([f"--repo_id={REPO_ID}", f"--root={state_dataset_root}", f"--policy.type={policy_type}",
+                               "--policy.device=cpu", "--policy.max_goal_distance=40", "--policy.obs_traj_stride=4",
+                               "--num_samples=5", "--seed=1", f"--output={output}"])
+    assert len(logged) == 5
+    data = read_rrd(output)
+    states = np.array(state_dataset.hf_dataset["observation.state"], dtype=np.float32)
+    actions = np.array(state_dataset.hf_dataset["action"], dtype=np.float32)
+    assert [r["Scalars:scalars"][0] for r in temporal(data["summary/d"], "sample")] == [s["d"] for s in logged]
+    for s in logged:
+        root, k, d = f"sample_{s['sample']}", s["row"], int(s["d"])
+        assert 0 <= d <= 40
+        assert data[f"{root}/d"][0]["Scalars:scalars"] == [float(d)]
+        np.testing.assert_allclose(data[f"{root}/world/obs"][0]["Points3D:positions"][0][:2], states[k], atol=1e-6)
+        np.testing.assert_allclose(data[f"{root}/world/goal"][0]["Points3D:positions"][0][:2], states[k + d], atol=1e-6)
+        strip = np.array(data[f"{root}/world/action_traj"][0]["LineStrips3D:strips"][0])
+        assert strip.shape == (8, 3)  # L_a = 8, S_a = 1, held at the goal
+        np.testing.assert_allclose(strip[:, :2], actions[[k + min(j, d) for j in range(8)]], atol=1e-6)
+        if policy_type == "efm_ps":  # tau^o: L_o = 3 states S_o = 4 frames apart, clamped at the goal
+            traj = np.array(data[f"{root}/world/obs_traj"][0]["LineStrips3D:strips"][0])
+            np.testing.assert_allclose(traj[:, :2], states[[k + min(4 * j, d) for j in range(3)]], atol=1e-6)
+        else:
+            assert f"{root}/world/obs_traj" not in data
+    assert len(RrdReader(output).blueprints()) == 1
+
+
+def test_log_dataset_with_video(video_dataset_root, tmp_path):
+    output = tmp_path / "video_samples.rrd"
+    log_dataset.main([f"--repo_id={REPO_ID}", f"--root={video_dataset_root}", "--policy.type=efm_pc", "--policy.device=cpu",
+                      "--policy.max_goal_distance=20", "--policy.obs_traj_stride=4", "--num_samples=2", f"--output={output}"])
+    data = read_rrd(output)
+    for n in range(2):
+        for path in ("images/top", "goal_images/top", "traj_images/top/0", "traj_images/top/2"):
+            row = data[f"sample_{n}/{path}"][0]
+            assert row["Image:format"][0]["width"] == 32 and len(row["Image:buffer"][0]) == 32 * 32 * 3
