@@ -12,11 +12,14 @@ least-squares compromise. Positions outside :data:`WORKSPACE_LOW` .. :data:`WORK
 clipped; NaN/inf entries raise ``ValueError``. The 180-degree symmetry of the gripper is *not*
 exploited: the commanded orientation is tracked as given.
 
-Pot grasp simplification (:class:`PotWeld`): a one-hand pinch on a round bar cannot hold the
-off-axis pot (it swings), so when the gripper command is > 0.5 and both finger sides touch the
-pot, an (initially inactive) weld equality between the left gripper and the pot is activated at
-the current relative pose; it is released when the gripper command drops below 0.5. Door and tray
-handles are grasped by friction only.
+Grasp simplification (:class:`GraspWeld`, alias :class:`PotWeld`): a one-hand pinch on a round bar
+cannot hold the off-axis pot (it swings), so when the gripper command is > 0.5 and both finger
+sides (fingertips 1-2 and fingertip 3) touch the pot, an (initially inactive) weld equality between
+the left gripper and the pot is activated at the current relative pose. The same gating activates
+a ball-joint (connect) equality at the TCP for the door handle (and the tray handle): the door then
+follows the hand's position along its arc while the handle may turn in the hand. Everything is
+released as soon as the gripper command drops below 0.5. The tray is normally pulled/pushed by the
+friction pinch alone (the fingers' inner links close on its box bar before the fingertips do).
 """
 
 from __future__ import annotations
@@ -94,47 +97,93 @@ def validate_command(command: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------------------------- controller
 
 
-class PotWeld:
-    """Weld-on-contact grasp of the pot, gated by gripper command and two-sided finger contact."""
+class GraspWeld:
+    """Weld-on-contact grasps of the pot, the door handle and the tray handle.
+
+    Gating (identical for every object): gripper command > 0.5 **and** both finger sides (fingertips
+    1-2 and fingertip 3) in contact with the object's grasp geoms (any pot geom; the door / tray
+    handle geoms). Then the object's inactive weld equality is activated at the current relative
+    pose; all welds are released as soon as the gripper command drops below 0.5. At most one weld is
+    active at a time. The door and tray welds use a small ``torquescale`` (rotation about the bar is
+    left almost free, like a real pinch grasp on a bar); the pot weld is rigid.
+    """
+
+    TORQUESCALE = {"pot": 1.0, "door": 0.02, "tray": 0.2}
 
     def __init__(self, model: mujoco.MjModel, handles: KitchenHandles):
         self.model, self.h = model, handles
+        self.targets = [("pot", handles.pot_weld, handles.pot_body, handles.pot_geoms)]
+        if handles.door_weld >= 0:
+            self.targets.append(("door", handles.door_weld, handles.door_body, handles.door_handle_geoms))
+        if handles.tray_weld >= 0:
+            self.targets.append(("tray", handles.tray_weld, handles.tray_body, handles.tray_handle_geoms))
 
-    def both_sides_touch(self, data: mujoco.MjData) -> bool:
+    def both_sides_touch(self, data: mujoco.MjData, geoms: frozenset | None = None) -> bool:
         h = self.h
+        geoms = h.pot_geoms if geoms is None else geoms
         side_a = side_b = False
         for i in range(data.ncon):
             c = data.contact[i]
             g1, g2 = int(c.geom1), int(c.geom2)
-            if g1 in h.pot_geoms:
+            if g1 in geoms:
                 g1, g2 = g2, g1
-            if g2 not in h.pot_geoms:
+            if g2 not in geoms:
                 continue
             side_a |= g1 in h.finger_geoms_a
             side_b |= g1 in h.finger_geoms_b
         return side_a and side_b
 
+    def active(self, data: mujoco.MjData) -> str | None:
+        """Name of the welded object ("pot", "door", "tray") or None."""
+        for name, eq, _, _ in self.targets:
+            if data.eq_active[eq]:
+                return name
+        return None
+
     def update(self, data: mujoco.MjData, gripper_cmd: float) -> None:
-        h, eq = self.h, self.h.pot_weld
+        h = self.h
         if gripper_cmd < 0.5:
-            data.eq_active[eq] = 0
+            for _, eq, _, _ in self.targets:
+                data.eq_active[eq] = 0
             return
-        if data.eq_active[eq] or not self.both_sides_touch(data):
+        if self.active(data) is not None:
             return
-        p1, p2 = data.xpos[h.left_gripper_body], data.xpos[h.pot_body]
-        q1, q2 = data.xquat[h.left_gripper_body], data.xquat[h.pot_body]
-        r1 = data.xmat[h.left_gripper_body].reshape(3, 3)
-        rel_q = np.zeros(4)
-        q1_inv = np.zeros(4)
-        mujoco.mju_negQuat(q1_inv, q1)
-        mujoco.mju_mulQuat(rel_q, q1_inv, q2)
-        # weld data layout: anchor (3), relpose pos (3), relpose quat (4), torquescale (1)
-        d = np.zeros(11)
-        d[3:6] = r1.T @ (p2 - p1)
-        d[6:10] = rel_q
-        d[10] = 1.0
-        _set_eq_data(self.model, data, eq, d)
-        data.eq_active[eq] = 1
+        for name, eq, body, geoms in self.targets:
+            if not self.both_sides_touch(data, geoms):
+                continue
+            p1, p2 = data.xpos[h.left_gripper_body], data.xpos[body]
+            q1, q2 = data.xquat[h.left_gripper_body], data.xquat[body]
+            r1 = data.xmat[h.left_gripper_body].reshape(3, 3)
+            rel_q = np.zeros(4)
+            q1_inv = np.zeros(4)
+            mujoco.mju_negQuat(q1_inv, q1)
+            mujoco.mju_mulQuat(rel_q, q1_inv, q2)
+            # weld data layout: anchor (3), relpose pos (3), relpose quat (4), torquescale (1)
+            tcp = data.site_xpos[h.left_tcp]
+            if self.model.eq_type[eq] == mujoco.mjtEq.mjEQ_CONNECT:
+                # connect data layout: anchor in body1 (gripper) frame (3), anchor in body2 frame (3)
+                d = np.zeros(6)
+                d[0:3] = r1.T @ (tcp - p1)
+                d[3:6] = data.xmat[body].reshape(3, 3).T @ (tcp - p2)
+                _set_eq_data(self.model, data, eq, d)
+                data.eq_active[eq] = 1
+                return
+            d = np.zeros(11)
+            # weld point = TCP (between the fingertips): data[0:3] is it in the object (body2) frame
+            # and data[3:6] in the gripper (body1) frame, so a low torquescale lets the object
+            # pivot about the grasp point
+            tcp = data.site_xpos[h.left_tcp]
+            r2 = data.xmat[body].reshape(3, 3)
+            d[0:3] = r2.T @ (tcp - p2)
+            d[3:6] = r1.T @ (tcp - p1)
+            d[6:10] = rel_q
+            d[10] = self.TORQUESCALE[name]
+            _set_eq_data(self.model, data, eq, d)
+            data.eq_active[eq] = 1
+            return
+
+
+PotWeld = GraspWeld  # backwards-compatible name
 
 
 def _set_eq_data(model: mujoco.MjModel, data: mujoco.MjData, eq: int, values: np.ndarray) -> None:
@@ -174,7 +223,7 @@ class CartesianController:
         names = [n for n in HOME if n.startswith("arm_left")] + ["torso_1_joint", "torso_2_joint"]
         self.act = np.array([handles.actuator[n] for n in names])
         self.grip_act = handles.actuator["gripper_left_joint"]
-        self.weld = PotWeld(model, handles) if pot_weld else None
+        self.weld = GraspWeld(model, handles) if pot_weld else None
         self.q_target = self.q_home.copy()
         self.last_error = (np.inf, np.inf)
         self._jacp = np.zeros((3, model.nv))

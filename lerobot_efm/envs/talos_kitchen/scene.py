@@ -21,16 +21,37 @@ Robot (PAL Talos, Apache-2.0 model by PAL Robotics, via example-robot-data 6.0.0
   -z of ``gripper_left_base_link``; the fingers point along the site's -z axis.
 * Gripper joint ``gripper_left_joint``: 0 = open, -0.96 = closed.
 
-Kitchen (world frame: x forward from the robot, y to its left, z up):
+Kitchen (world frame: x forward from the robot, y to its left, z up). Layout chosen so that every
+grasp and every motion of the scripted primitives (:mod:`.primitives`) lies inside the left arm's
+dexterous workspace (checked with the IK):
 
-* table top at z = 0.85 m, centred at (0.50, -0.12);
-* cabinet (front plane x = 0.42, y in [0.30, 0.70], 1.25 m tall) whose upper compartment is closed
-  by a **hinged door** (``door_hinge``, vertical axis at y = 0.70, range [-2, 0] rad, 0 = closed,
-  negative = open towards the robot; vertical bar handle near (0.36, 0.32, 1.085)) and holds a
-  **pull-out tray** (``tray_slide``, along x, range [-0.28, 0] m, 0 = in, negative = pulled out);
+* table top at z = 0.85 m, centred at :data:`TABLE_CENTER` (0.50, -0.22) (x 0.30..0.70, y -0.50..0.06,
+  clear of the hanging right hand);
+* cabinet (front plane x = :data:`CAB_X0` = 0.60, y in [0.18, 0.52], 1.25 m tall). Its upper
+  compartment (z 0.92..1.25) is closed by a **hinged door** (``door_hinge``, range [-2, 0] rad,
+  0 = closed, negative = open towards the robot). The hinge is on the door's **-y edge** (towards
+  the robot's midline) and the joint axis is -z, so the handle's arc ends in front of the left
+  shoulder instead of far out to the left. Door handle: a vertical **box-section bar** (16 mm,
+  14 cm long) 5 cm in front of the panel at (0.537, 0.475, 1.085) when closed
+  (:func:`door_handle_pos` gives it for any angle). Door damping 1.5, frictionloss 0.1 (it stays
+  where it is released). Reachable arc: 0 .. about -1.3 rad; the primitives open to -1.2.
+* **pull-out tray = drawer below the door** (``tray_slide``, along x, range [-0.28, 0] m, 0 = in,
+  negative = pulled out) in a slot z 0.74..0.90 under the compartment shelf, so it is reachable
+  whatever the door angle (with the tray inside the door compartment the opened door panel lies
+  across the arm's path). Vertical box-section bar handle at (0.61, 0.35, 0.80) when in
+  (:func:`tray_handle_pos`); grasped with fingers pitched 0.8 rad down (horizontal fingers cannot
+  reach z 0.80). Tray floor top at z = 0.75 m.
 * a **red pot** (free joint ``pot_free``, hollow, 0.17 m diameter, ~0.8 kg) with two 13 cm bar
-  handles on +-y, standing on the table;
+  handles on +-y (:func:`pot_handle_pos`), standing on the table at :data:`POT_HOME` (0.42, -0.16);
 * one fixed external RGB camera ``front`` framing the robot and the kitchen.
+
+Grasps: the door and tray handles are pinched by friction; for the door (and as a fallback for the
+tray) a **ball-joint (connect) equality at the TCP** is activated on contact, and the pot uses a
+weld, both gated by gripper command > 0.5 **and** contact on both finger sides
+(:class:`~.control.GraspWeld`). All three equalities are inactive after :func:`reset_kitchen`.
+
+Bug fixed here: ``MjSpec`` hinge ranges are in **degrees** (compiler default): the old
+``range=[-2, 0]`` compiled to [-0.035, 0] rad, which is why the door never opened past -0.035.
 
 :func:`build_kitchen` returns ``(model, data, handles)``; the compiled model is cached per process
 (per ``image_size``), every call gets a fresh ``MjData`` reset to the home keyframe.
@@ -80,8 +101,16 @@ HOME = {
     "gripper_right_joint": 0.0,
 }
 
-POT_HOME = (0.42, -0.12)  # pot centre on the table (x, y)
+POT_HOME = (0.42, -0.16)  # pot centre on the table (x, y)
 TABLE_TOP = 0.85
+TABLE_CENTER = (0.50, -0.22)
+TABLE_HALF = (0.20, 0.28)  # table top half extents (x, y): x in [0.30, 0.70], y in [-0.50, 0.06]
+CAB_X0, CAB_Y0, CAB_Y1 = 0.60, 0.18, 0.52  # cabinet front plane x and its y extent
+DOOR_HINGE = (CAB_X0 - 0.013, CAB_Y0 + 0.005, 1.085)  # hinge axis position (world, door body origin)
+DOOR_HANDLE_LOCAL = (-0.05, 0.29, 0.0)  # handle bar centre in the door frame
+DRAWER_Z = 0.74  # bottom of the drawer slot under the door compartment
+TRAY_HANDLE_LOCAL = (-0.20, 0.0, 0.06)  # tray handle bar centre in the tray frame
+TRAY_POS0 = (CAB_X0 + 0.21, (CAB_Y0 + CAB_Y1) / 2, DRAWER_Z + 0.002)  # tray body origin when pushed in  # tray handle bar centre in the tray frame
 POT_RADIUS = 0.085
 POT_HEIGHT = 0.10
 
@@ -194,48 +223,60 @@ def _add_kitchen(spec: mujoco.MjSpec) -> None:
     world.add_light(name="top", pos=[0.4, 0.0, 2.8], dir=[0, 0, -1], castshadow=False,
                     diffuse=[0.5, 0.5, 0.5])
 
-    # table
-    table = world.add_body(name="table", pos=[0.50, -0.12, 0.0])
-    _box(table, "table_top", [0, 0, TABLE_TOP - 0.02], [0.22, 0.30, 0.02], WOOD)
+    # table (right of the robot's midline, clear of the cabinet)
+    table = world.add_body(name="table", pos=[TABLE_CENTER[0], TABLE_CENTER[1], 0.0])
+    thx_, thy_ = TABLE_HALF
+    _box(table, "table_top", [0, 0, TABLE_TOP - 0.02], [thx_, thy_, 0.02], WOOD)
     for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
-        _box(table, f"table_leg{i}", [sx * 0.19, sy * 0.27, (TABLE_TOP - 0.04) / 2], [0.02, 0.02, (TABLE_TOP - 0.04) / 2],
-             WOOD)
+        _box(table, f"table_leg{i}", [sx * (thx_ - 0.03), sy * (thy_ - 0.03), (TABLE_TOP - 0.04) / 2],
+             [0.02, 0.02, (TABLE_TOP - 0.04) / 2], WOOD)
 
-    # cabinet: front plane x = 0.42, y in [0.30, 0.70], depth 0.40, height 1.25
-    x0, x1, y0, y1, h, t = 0.42, 0.82, 0.30, 0.70, 1.25, 0.02
+    # cabinet: front plane x = CAB_X0, y in [CAB_Y0, CAB_Y1], depth 0.40, height 1.25
+    x0, y0, y1 = CAB_X0, CAB_Y0, CAB_Y1
+    x1, h, t = x0 + 0.40, 1.25, 0.02
     cab = world.add_body(name="cabinet")
     xm, ym = (x0 + x1) / 2, (y0 + y1) / 2
-    _box(cab, "cab_lower", [xm, ym, 0.45], [(x1 - x0) / 2, (y1 - y0) / 2, 0.45], WHITE)  # solid base to 0.90
+    # solid base to z = DRAWER_Z, then an open drawer slot (DRAWER_Z .. 0.90) holding the pull-out tray
+    _box(cab, "cab_lower", [xm, ym, DRAWER_Z / 2], [(x1 - x0) / 2, (y1 - y0) / 2, DRAWER_Z / 2], WHITE)
+    _box(cab, "cab_slot_back", [x1 - t / 2, ym, (DRAWER_Z + 0.90) / 2], [t / 2, (y1 - y0) / 2, (0.90 - DRAWER_Z) / 2], WHITE)
+    for nm_, yy in (("r", y0 + t / 2), ("l", y1 - t / 2)):
+        _box(cab, f"cab_slot_side_{nm_}", [xm, yy, (DRAWER_Z + 0.90) / 2], [(x1 - x0) / 2, t / 2, (0.90 - DRAWER_Z) / 2],
+             WHITE)
     _box(cab, "cab_shelf", [xm, ym, 0.91], [(x1 - x0) / 2, (y1 - y0) / 2, 0.01], WHITE)   # floor of compartment 0.92
     _box(cab, "cab_top", [xm, ym, h - t / 2], [(x1 - x0) / 2, (y1 - y0) / 2, t / 2], WHITE)
     _box(cab, "cab_back", [x1 - t / 2, ym, (0.92 + h) / 2], [t / 2, (y1 - y0) / 2, (h - 0.92) / 2], WHITE)
     _box(cab, "cab_side_r", [xm, y0 + t / 2, (0.92 + h) / 2], [(x1 - x0) / 2, t / 2, (h - 0.92) / 2], WHITE)
     _box(cab, "cab_side_l", [xm, y1 - t / 2, (0.92 + h) / 2], [(x1 - x0) / 2, t / 2, (h - 0.92) / 2], WHITE)
 
-    # hinged door in front of the compartment, hinge at the +y edge
-    door = cab.add_body(name="door", pos=[x0 - 0.013, y1 - 0.005, 1.085])
-    door.add_joint(name="door_hinge", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1], range=[-2.0, 0.0],
-                   limited=True, damping=0.3, frictionloss=0.05, armature=0.01)
-    _box(door, "door_panel", [0, -0.195, 0], [0.01, 0.19, 0.16], WOOD, mass=2.0)
-    hy = 0.32 - (y1 - 0.005)  # handle y offset in the door frame
-    hx = 0.36 - (x0 - 0.013)
-    _capsule(door, "door_handle", [hx, hy, -0.06], [hx, hy, 0.06], 0.011, METAL, mass=0.05)
-    for i, z in enumerate((-0.06, 0.06)):
-        _capsule(door, f"door_handle_arm{i}", [-0.01, hy, z], [hx, hy, z], 0.007, METAL, mass=0.02)
+    # hinged door in front of the compartment. The hinge is on the -y edge (towards the robot's
+    # midline) and the joint axis is -z, so that negative angles open the door towards the robot
+    # and the handle's arc stays inside the left arm's workspace.
+    door = cab.add_body(name="door", pos=list(DOOR_HINGE))
+    door.add_joint(name="door_hinge", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, -1],
+                   range=[-np.degrees(2.0), 0.0],  # MjSpec hinge ranges are in degrees (compiler default)
+                   limited=True, damping=1.5, frictionloss=0.1, armature=0.01)
+    dw = y1 - y0 - 0.01
+    _box(door, "door_panel", [0, dw / 2, 0], [0.01, dw / 2, 0.16], WOOD, mass=2.0)
+    hx, hy = DOOR_HANDLE_LOCAL[0], DOOR_HANDLE_LOCAL[1]
+    _box(door, "door_handle", [hx, hy, 0], [0.008, 0.008, 0.07], METAL, mass=0.05, friction=[1.5, 0.02, 0.002])
+    for i, z in enumerate((-0.065, 0.065)):
+        _box(door, f"door_handle_arm{i}", [(hx - 0.01) / 2, hy, z], [(-hx - 0.01) / 2 + 0.002, 0.006, 0.006],
+             METAL, mass=0.02)
 
     # pull-out tray in the compartment (slides along x towards the robot)
-    tray = cab.add_body(name="tray", pos=[0.63, ym, 0.925])
+    tray = cab.add_body(name="tray", pos=list(TRAY_POS0))
     tray.add_joint(name="tray_slide", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0], range=[-0.28, 0.0],
                    limited=True, damping=3.0, frictionloss=0.2, armature=0.01)
-    _box(tray, "tray_bottom", [0, 0, 0.004], [0.16, 0.17, 0.004], METAL, mass=0.6)
-    _box(tray, "tray_front", [-0.155, 0, 0.03], [0.005, 0.17, 0.03], METAL, mass=0.1)
-    _box(tray, "tray_rear", [0.155, 0, 0.03], [0.005, 0.17, 0.03], METAL, mass=0.1)
+    tw = (y1 - y0) / 2 - 0.025
+    _box(tray, "tray_bottom", [0, 0, 0.004], [0.16, tw, 0.004], METAL, mass=0.6)
+    _box(tray, "tray_front", [-0.155, 0, 0.03], [0.005, tw, 0.03], METAL, mass=0.1)
+    _box(tray, "tray_rear", [0.155, 0, 0.03], [0.005, tw, 0.03], METAL, mass=0.1)
     for i, s in enumerate((-1, 1)):
-        _box(tray, f"tray_side{i}", [0, s * 0.165, 0.03], [0.16, 0.005, 0.03], METAL, mass=0.1)
-    thx = -0.19  # handle bar 3.5 cm in front of the tray front
-    _capsule(tray, "tray_handle", [thx, -0.07, 0.045], [thx, 0.07, 0.045], 0.01, METAL, mass=0.05)
-    for i, y in enumerate((-0.07, 0.07)):
-        _capsule(tray, f"tray_handle_arm{i}", [-0.16, y, 0.045], [thx, y, 0.045], 0.006, METAL, mass=0.02)
+        _box(tray, f"tray_side{i}", [0, s * (tw - 0.005), 0.03], [0.16, 0.005, 0.03], METAL, mass=0.1)
+    thx, thz = TRAY_HANDLE_LOCAL[0], TRAY_HANDLE_LOCAL[2]  # vertical box-section handle bar (like the door's)
+    _box(tray, "tray_handle", [thx, 0, thz], [0.008, 0.008, 0.045], METAL, mass=0.05, friction=[1.5, 0.02, 0.002])
+    for i, z in enumerate((thz - 0.04, thz + 0.04)):
+        _box(tray, f"tray_handle_arm{i}", [(thx - 0.16) / 2, 0, z], [(-0.16 - thx) / 2, 0.006, 0.006], METAL, mass=0.02)
 
     # red pot with two bar handles on +-y
     pot = world.add_body(name="pot", pos=[POT_HOME[0], POT_HOME[1], TABLE_TOP + 0.001])
@@ -287,6 +328,12 @@ class KitchenHandles:
     finger_geoms_a: frozenset  # collision geoms of fingertips 1-2 (one finger side)
     finger_geoms_b: frozenset  # collision geoms of fingertip 3 (the opposite side)
     pot_geoms: frozenset
+    door_body: int = -1
+    tray_body: int = -1
+    door_weld: int = -1       # id of the (initially inactive) hand-door-handle weld equality
+    tray_weld: int = -1       # id of the (initially inactive) hand-tray-handle weld equality
+    door_handle_geoms: frozenset = frozenset()
+    tray_handle_geoms: frozenset = frozenset()
 
 
 def _compile(image_size: int) -> tuple[mujoco.MjModel, KitchenHandles]:
@@ -298,6 +345,11 @@ def _compile(image_size: int) -> tuple[mujoco.MjModel, KitchenHandles]:
     # weld-on-contact grasp simplification for the pot (see control.PotWeld); inactive by default
     spec.add_equality(name="pot_weld", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
                       name1=ROBOT_PREFIX + "gripper_left_base_link", name2="pot", active=False)
+    # door / tray handle grasps: ball-joint (connect) constraints at the TCP, so the hand can rotate
+    # about the handle like a real pinch on a bar while the object follows the hand's position
+    for obj in ("door", "tray"):
+        spec.add_equality(name=f"{obj}_weld", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                          name1=ROBOT_PREFIX + "gripper_left_base_link", name2=obj, active=False)
     spec.visual.global_.offwidth = max(int(image_size), 640)
     spec.visual.global_.offheight = max(int(image_size), 480)
     model = spec.compile()
@@ -340,6 +392,12 @@ def _compile(image_size: int) -> tuple[mujoco.MjModel, KitchenHandles]:
         finger_geoms_a=geoms_of(["gripper_left_fingertip_1_link", "gripper_left_fingertip_2_link"]),
         finger_geoms_b=geoms_of(["gripper_left_fingertip_3_link"]),
         pot_geoms=frozenset(g for g in range(model.ngeom) if model.geom_bodyid[g] == pot_body),
+        door_body=model.body("door").id,
+        tray_body=model.body("tray").id,
+        door_weld=model.equality("door_weld").id,
+        tray_weld=model.equality("tray_weld").id,
+        door_handle_geoms=frozenset(g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("door_handle")),
+        tray_handle_geoms=frozenset(g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("tray_handle")),
     )
     return model, handles
 
@@ -355,7 +413,8 @@ def reset_kitchen(model: mujoco.MjModel, data: mujoco.MjData, handles: KitchenHa
     data.qpos[:] = handles.home_qpos
     for name, act in handles.actuator.items():
         data.ctrl[act] = HOME[name]
-    data.eq_active[handles.pot_weld] = 0
+    for eq in (handles.pot_weld, handles.door_weld, handles.tray_weld):
+        data.eq_active[eq] = 0
     mujoco.mj_forward(model, data)
 
 
@@ -387,6 +446,30 @@ def pot_pose(data: mujoco.MjData, handles: KitchenHandles) -> tuple[np.ndarray, 
     """Pot position (3,) of its base centre and unit quaternion (4,) ``w, x, y, z`` in the world frame."""
     a = handles.pot_qpos
     return data.qpos[a : a + 3].copy(), data.qpos[a + 3 : a + 7].copy()
+
+
+def door_handle_pos(data: mujoco.MjData, handles: KitchenHandles, angle: float | None = None) -> np.ndarray:
+    """World position (3,) of the door handle bar centre, at the current or a given hinge ``angle``."""
+    a = door_angle(data, handles) if angle is None else float(angle)
+    c, s = np.cos(-a), np.sin(-a)  # joint axis is -z: world yaw of the door = -angle
+    lx, ly, lz = DOOR_HANDLE_LOCAL
+    return np.array([DOOR_HINGE[0] + c * lx - s * ly, DOOR_HINGE[1] + s * lx + c * ly, DOOR_HINGE[2] + lz])
+
+
+def tray_handle_pos(data: mujoco.MjData, handles: KitchenHandles, slide: float | None = None) -> np.ndarray:
+    """World position (3,) of the tray handle bar centre at the current or a given ``slide``."""
+    sl = tray_slide(data, handles) if slide is None else float(slide)
+    x0 = TRAY_POS0[0] + sl + TRAY_HANDLE_LOCAL[0]
+    return np.array([x0, TRAY_POS0[1] + TRAY_HANDLE_LOCAL[1], TRAY_POS0[2] + TRAY_HANDLE_LOCAL[2]])
+
+
+def pot_handle_pos(data: mujoco.MjData, handles: KitchenHandles, side: str = "left") -> np.ndarray:
+    """World position (3,) of the centre of the pot's ``left`` (+y) or ``right`` (-y) handle bar."""
+    pos, quat = pot_pose(data, handles)
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, quat)
+    s = 1.0 if side == "left" else -1.0
+    return pos + mat.reshape(3, 3) @ np.array([0.0, s * (POT_RADIUS + 0.065), POT_HEIGHT - 0.01])
 
 
 def gripper_opening(data: mujoco.MjData, handles: KitchenHandles) -> float:

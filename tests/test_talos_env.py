@@ -1,0 +1,178 @@
+"""Talos kitchen gym env: spaces, tasks, goals, success and the LeRobot factory/preprocessing path."""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import torch  # noqa: E402
+
+pytest.importorskip("mujoco")
+
+from gymnasium.utils.env_checker import check_env  # noqa: E402
+
+from lerobot.envs.configs import EnvConfig  # noqa: E402
+from lerobot.envs.factory import make_env  # noqa: E402
+from lerobot.envs.utils import env_to_policy_features, preprocess_observation  # noqa: E402
+from lerobot_efm.envs.talos_kitchen import tasks  # noqa: E402
+from lerobot_efm.envs.talos_kitchen.env import (  # noqa: E402
+    ENV_STATE_NAMES, GYM_ID, STATE_NAMES, TalosKitchenEnv, TalosKitchenEnvConfig,
+)
+
+SIZE = 64
+POLICY_KEYS = {
+    "observation.images.front": (3, SIZE, SIZE),
+    "observation.state": (20,),
+    "observation.environment_state": (9,),
+    "observation.goal.images.front": (3, SIZE, SIZE),
+    "observation.goal.state": (20,),
+    "observation.goal.environment_state": (9,),
+}
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = TalosKitchenEnv(task="open_door", image_size=SIZE)
+    yield e
+    e.close()
+
+
+def _hold(obs):
+    """The measured hand pose as a command (hold still)."""
+    return obs["agent_pos"][10:20].copy()
+
+
+def test_task_suite():
+    assert len(tasks.TASK_NAMES) >= 10
+    assert {"open_door", "close_door", "pull_tray", "push_tray", "move_pot_on_table"} <= set(tasks.TASKS)
+    long = tasks.TASKS[tasks.LONG_TASK]  # paper Fig. 8
+    assert (long.initial.door, long.initial.tray, long.initial.pot_on) == (tasks.DOOR_OPEN, tasks.TRAY_OUT, "table")
+    assert (long.goal.door, long.goal.tray, long.goal.pot_on) == (tasks.DOOR_CLOSED, tasks.TRAY_IN, "tray")
+    for t in tasks.TASKS.values():
+        assert t.initial != t.goal and t.description
+    with pytest.raises(ValueError, match="open_door.*store_pot"):
+        tasks.check_task("make_coffee")
+    with pytest.raises(ValueError, match="valid tasks"):
+        TalosKitchenEnvConfig(task="make_coffee")
+    assert len(STATE_NAMES) == 20 and len(ENV_STATE_NAMES) == 9
+
+
+def test_unknown_task_env_error():
+    with pytest.raises(ValueError, match="valid tasks: .*'open_door'"):
+        TalosKitchenEnv(task="nope")
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # unbounded state boxes, non-normalised action box
+def test_check_env(env):
+    check_env(env, skip_render_check=True)
+    assert env.metadata["render_fps"] == 25
+    assert env.task == "open_door" and env.task_description == "open the cabinet door"
+    env.reset(seed=0)
+    img = env.render()
+    assert img.shape == (SIZE, SIZE, 3) and img.dtype == np.uint8
+
+
+def test_goal_image_state_and_success(env):
+    obs, info = env.reset(seed=1)
+    assert not info["is_success"]
+    assert obs["agent_pos"].dtype == np.float32 and obs["agent_pos"].shape == (20,)
+    np.testing.assert_allclose(obs["agent_pos"][:10], obs["agent_pos"][10:], atol=1e-5)  # command = hold
+    goal_img = obs["goal.images.front"]
+    assert goal_img.shape == (SIZE, SIZE, 3) and goal_img.dtype == np.uint8
+    assert np.abs(goal_img.astype(int) - obs["pixels"]["front"].astype(int)).mean() > 0.5  # door moved
+    # a step keeps the cached goal; holding still does not succeed
+    obs2, reward, terminated, _, info = env.step(_hold(obs))
+    assert not info["is_success"] and not terminated and reward == 0.0
+    np.testing.assert_array_equal(obs2["goal.images.front"], goal_img)
+    np.testing.assert_array_equal(obs2["goal.environment_state"], obs["goal.environment_state"])
+    # the goal observations are those of the scene put in the goal state
+    env.set_goal_scene()
+    np.testing.assert_array_equal(env.render(), goal_img)
+    obs3, reward, terminated, _, info = env.step(obs["goal.state"][:10])
+    assert info["is_success"] and terminated and reward == 1.0
+    np.testing.assert_allclose(obs3["environment_state"][:2], obs["goal.environment_state"][:2], atol=0.02)
+
+
+def test_success_when_objects_set_to_goal_qpos():
+    e = TalosKitchenEnv(task="push_tray_with_pot", image_size=SIZE, randomize=False)
+    try:
+        obs, info = e.reset(seed=0)
+        start, goal = obs["environment_state"], obs["goal.environment_state"]
+        assert not info["is_success"]
+        # the pot rides on the tray: it moves by the tray's slide, its height is unchanged
+        np.testing.assert_allclose(goal[2] - start[2], goal[1] - start[1], atol=0.01)
+        np.testing.assert_allclose(goal[3:5], start[3:5], atol=0.01)
+        h, d = e.h, e.data
+        d.qpos[h.door_qpos], d.qpos[h.tray_qpos] = goal[0], goal[1]
+        d.qpos[h.pot_qpos: h.pot_qpos + 7] = goal[2:9]
+        d.qvel[:] = 0.0
+        obs, reward, terminated, _, info = e.step(_hold(obs))
+        assert info["is_success"] and terminated, info
+    finally:
+        e.close()
+
+
+def test_invalid_actions(env):
+    obs, _ = env.reset(seed=2)
+    bad = _hold(obs)
+    bad[[1, 9]] = [np.nan, np.inf]
+    with pytest.raises(ValueError, match=r"y \(index 1\).*gripper \(index 9\)"):
+        env.step(bad)
+    far = _hold(obs)
+    far[:3] = [5.0, -5.0, 9.0]  # out of the workspace: clipped, not an error
+    obs, *_ = env.step(far)
+    from lerobot_efm.envs.talos_kitchen.control import WORKSPACE_HIGH, WORKSPACE_LOW
+
+    np.testing.assert_allclose(obs["agent_pos"][:3], [WORKSPACE_HIGH[0], WORKSPACE_LOW[1], WORKSPACE_HIGH[2]],
+                               atol=1e-6)
+
+
+def test_all_cycles_through_suite():
+    e = TalosKitchenEnv(task="all", image_size=SIZE)
+    try:
+        seen = []
+        for i in range(len(tasks.TASK_NAMES) + 1):
+            _, info = e.reset(seed=i)
+            seen.append(e.task)
+            assert info["task"] == e.task and e.task_description == tasks.TASKS[e.task].description
+        assert seen == list(tasks.TASK_NAMES) + [tasks.TASK_NAMES[0]]
+        e.reset(options={"task": tasks.LONG_TASK})
+        assert e.task == tasks.LONG_TASK and e.suite == "all"
+        with pytest.raises(ValueError, match="valid tasks"):
+            e.reset(options={"task": "nope"})
+    finally:
+        e.close()
+
+
+def test_lerobot_factory_keys():
+    cfg = TalosKitchenEnvConfig(task="all", image_size=SIZE, episode_length=50)
+    assert EnvConfig.get_choice_class("talos_kitchen") is TalosKitchenEnvConfig
+    assert cfg.gym_id == GYM_ID and GYM_ID in gym.registry and cfg.fps == 25
+    feats = env_to_policy_features(cfg)
+    assert {k: tuple(v.shape) for k, v in feats.items() if k != "action"} == POLICY_KEYS
+    assert tuple(feats["action"].shape) == (10,)
+    vec = make_env(cfg, n_envs=2, use_async_envs=False)[cfg.type][0]
+    try:
+        assert isinstance(vec, gym.vector.SyncVectorEnv)
+        obs, _ = vec.reset(seed=[0, 1])
+        obs, _, _, _, info = vec.step(obs["agent_pos"][:, 10:])
+        assert "is_success" in info and info["is_success"].shape == (2,)
+        assert vec.call("_max_episode_steps") == (50, 50)
+        assert vec.metadata["render_fps"] == 25
+        assert vec.call("task") == ("open_door", "open_door")
+        batch = preprocess_observation(obs)
+        batch["task"] = list(vec.call("task_description"))
+        env_pre, _ = cfg.get_env_processors()
+        batch = {k: v for k, v in env_pre(batch).items() if k.startswith("observation.")}
+        assert {k: tuple(v.shape[1:]) for k, v in batch.items()} == POLICY_KEYS
+        for k, v in batch.items():
+            assert v.shape[0] == 2 and v.dtype == torch.float32, k
+            if "images" in k:
+                assert 0.0 <= float(v.min()) and float(v.max()) <= 1.0
+        # goal image went through the same conversion as the camera image
+        goal = batch["observation.goal.images.front"]
+        assert torch.allclose(goal[0], torch.from_numpy(obs["goal.images.front"][0]).permute(2, 0, 1).float() / 255)
+    finally:
+        vec.close()
