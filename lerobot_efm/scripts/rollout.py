@@ -86,6 +86,16 @@ def _env0_info(info: dict) -> dict:
     return out
 
 
+def _task_text(env) -> str:
+    """The env's task description (LeRobot envs expose ``task_description`` and ``task``), or ''."""
+    for name in ("task_description", "task"):
+        try:
+            return str(env.call(name)[0])
+        except AttributeError:
+            continue
+    return ""
+
+
 def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, postprocessor, log: RolloutLogger,
                 index: int, seed: int, max_steps: int, render: bool) -> dict:
     """One episode in env 0 of a (1-env) vector env, as lerobot_eval's rollout, logging every step."""
@@ -93,18 +103,12 @@ def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, 
 
     policy.reset()
     observation, info = env.reset(seed=[seed], options={NEW_ROLLOUT_OPTION: True})
-    try:
-        task = list(env.call("task_description"))
-    except (AttributeError, NotImplementedError):
-        try:
-            task = list(env.call("task"))
-        except (AttributeError, NotImplementedError):
-            task = [""]
-    log.begin_episode(index, task=task[0], seed=seed)
+    task = _task_text(env)
+    log.begin_episode(index, task=task, seed=seed)
     step, success, done, reward_sum = 0, False, False, 0.0
     while not done and step < max_steps:
         obs = preprocess_observation(observation)
-        obs["task"] = task
+        obs["task"] = [task]
         obs = env_preprocessor(obs)
         log.log_observation(step, obs)
         if render:
