@@ -158,16 +158,21 @@ def grasp(command: np.ndarray, steps: int = 15, data=None, handles=None, max_ste
         yield from hold(c, 3)
 
 
-def release(command: np.ndarray, steps: int = 12, data=None, handles=None, max_steps: int = 40) -> Iterator[np.ndarray]:
-    """Open the gripper in place; with ``data``/``handles`` also wait until it is measured open."""
+def release(command: np.ndarray, steps: int = 12, data=None, handles=None, max_steps: int = 40):
+    """Open the gripper in place; with ``data``/``handles`` also wait until it is measured open.
+
+    Returns (``yield from``) the open command, the one to retreat from: retreating from the closed
+    command would close the gripper again and re-grasp the object.
+    """
     yield from set_gripper(command, OPEN, steps)
+    c = np.asarray(command, float).copy()
+    c[9] = OPEN
     if data is not None:
-        c = np.asarray(command, float).copy()
-        c[9] = OPEN
         for _ in range(max_steps):
             if scene.gripper_opening(data, handles) < 0.1:
                 break
             yield c.copy()
+    return c
 
 
 def approach(start: np.ndarray, pos, mat, direction, standoff: float = 0.10, grip: float = PRE,
@@ -237,8 +242,8 @@ def door_move(data, handles, start: np.ndarray, target_angle: float, standoff: f
     last = c
     for last in door_arc(data, handles, c, target_angle):
         yield last
-    yield from release(last, steps=10, data=data, handles=handles)
-    for last in retreat(last, -_toward_home(last[:3]), 0.08):
+    opened = yield from release(last, steps=10, data=data, handles=handles)
+    for last in retreat(opened, -_toward_home(last[:3]), 0.08):
         yield last
 
 
@@ -266,9 +271,8 @@ def tray_move(data, handles, start: np.ndarray, target_slide: float) -> Iterator
     goal = cmd(scene.tray_handle_pos(data, handles, target_slide), mat, CLOSED)
     yield from move(c, goal, speed=0.10)
     yield from hold(goal, 10)
-    yield from release(goal, data=data, handles=handles)
-    last = goal
-    for last in retreat(goal, fwd, 0.08):
+    last = yield from release(goal, data=data, handles=handles)
+    for last in retreat(last, fwd, 0.08):
         yield last
 
 
@@ -300,9 +304,8 @@ def pot_pick_place(data, handles, start: np.ndarray, place_xy, place_z: float = 
     put = cmd(dst + [0, 0, 0.005], mat_place, CLOSED)
     yield from move(above, put, speed=0.08)
     yield from hold(put, 8)
-    yield from release(put, data=data, handles=handles)
-    last = put
-    for last in retreat(put, down, 0.10):
+    last = yield from release(put, data=data, handles=handles)
+    for last in retreat(last, down, 0.10):
         yield last
 
 
