@@ -14,17 +14,18 @@ HWC array under ``observation.goal.images.top`` and the env processor step of
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 from functools import lru_cache
 
 import gymnasium as gym
 import numpy as np
-import torch
 from gymnasium import spaces
 
-from lerobot.configs import FeatureType, PipelineFeatureType, PolicyFeature
+from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+
+from .goal_env import GoalEnvConfig, GoalImagesChannelFirstStep  # noqa: F401  (re-exported)
 
 GYM_ID = "lerobot_efm/PointReach-v0"
 MAX_STEP = 0.05  # max displacement per step
@@ -211,33 +212,13 @@ class PointReachEnv(gym.Env):
         return render_scene(self.pos, self.render_size, self.wall, goal=self.goal)
 
 
-@dataclass
-class GoalImagesChannelFirstStep(ObservationProcessorStep):
-    """Make ``observation.goal.images.*`` look like camera images: (B, 3, H, W) float in [0, 1].
-
-    ``preprocess_observation`` only converts the ``pixels`` entry; other arrays (our goal image)
-    pass through as float (B, H, W, 3) in [0, 255].
-    """
-
-    prefix: str = "observation.goal.images."
-
-    def observation(self, observation):
-        for key, img in list(observation.items()):
-            if key.startswith(self.prefix) and isinstance(img, torch.Tensor) and img.shape[-1] == 3:
-                img = img.unsqueeze(0) if img.ndim == 3 else img
-                observation[key] = img.permute(0, 3, 1, 2).float().contiguous() / 255.0
-        return observation
-
-    def transform_features(
-        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
-    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
-        return features
-
-
 @EnvConfig.register_subclass("efm_point_reach")
 @dataclass
-class PointReachEnvConfig(EnvConfig):
+class PointReachEnvConfig(GoalEnvConfig):
     """LeRobot config: ``--env.type=efm_point_reach --env.task=around_wall --env.obs_type=pixels_state``."""
+
+    GYM_ID: ClassVar[str] = GYM_ID
+    MODULE: ClassVar[str] = "lerobot_efm.envs"
 
     task: str | None = "random"
     fps: int = 20
@@ -273,14 +254,6 @@ class PointReachEnvConfig(EnvConfig):
             self.features[GOAL_IMAGE_KEY] = img
 
     @property
-    def package_name(self) -> str:
-        return "lerobot_efm.envs"  # imported by create_envs when GYM_ID is not registered yet
-
-    @property
-    def gym_id(self) -> str:
-        return GYM_ID  # one gym id; the task name goes through gym_kwargs
-
-    @property
     def gym_kwargs(self) -> dict:
         return {
             "task": self.task,
@@ -290,10 +263,6 @@ class PointReachEnvConfig(EnvConfig):
             "render_mode": self.render_mode,
             "max_episode_steps": self.episode_length,
         }
-
-    def get_env_processors(self):
-        pre = PolicyProcessorPipeline(steps=[GoalImagesChannelFirstStep()])
-        return pre, PolicyProcessorPipeline(steps=[])
 
 
 if GYM_ID not in gym.registry:

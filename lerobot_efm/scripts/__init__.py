@@ -1,1 +1,24 @@
 """Command-line scripts of lerobot_efm (rerun rollouts and dataset logging)."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+
+
+def run_cli(entry: Callable, argv: list[str] | None, prog: str):
+    """Run a ``parser.wrap()`` entry point as LeRobot's own CLIs do (logging set-up, plugin discovery);
+    with ``argv`` it runs in-process on those arguments (LeRobot's parser reads ``sys.argv``)."""
+    from lerobot.utils.import_utils import register_third_party_plugins
+    from lerobot.utils.utils import init_logging
+
+    init_logging()
+    register_third_party_plugins()
+    if argv is None:
+        return entry()
+    saved = sys.argv
+    sys.argv = [saved[0] if saved else prog, *argv]
+    try:
+        return entry()
+    finally:
+        sys.argv = saved

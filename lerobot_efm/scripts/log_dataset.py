@@ -11,7 +11,6 @@ policy config: ``--policy.type=<efm_*>`` plus ``--policy.<field>`` flags, or a c
 """
 
 import logging
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +20,7 @@ import torch
 import lerobot_efm  # noqa: F401  (registers the efm_* policies)
 from lerobot.configs import parser
 from lerobot.configs.policies import PreTrainedConfig
+from lerobot_efm.scripts import run_cli
 
 logger = logging.getLogger(__name__)
 
@@ -98,19 +98,7 @@ def log_dataset_main(cfg: LogDatasetConfig) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> list[dict]:
     """Console entry point; ``main([...])`` runs in-process with those CLI arguments."""
-    from lerobot.utils.import_utils import register_third_party_plugins
-    from lerobot.utils.utils import init_logging
-
-    init_logging()
-    register_third_party_plugins()
-    if argv is None:
-        return log_dataset_main()
-    saved = sys.argv
-    sys.argv = [saved[0] if saved else "log_dataset", *argv]
-    try:
-        return log_dataset_main()
-    finally:
-        sys.argv = saved
+    return run_cli(log_dataset_main, argv, "log_dataset")
 
 
 if __name__ == "__main__":

@@ -11,7 +11,6 @@ is logged is described in :mod:`lerobot_efm.viz.rollout_log`.
 
 
 import logging
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +21,7 @@ import lerobot_efm  # noqa: F401  (registers the efm_* policies and envs)
 from lerobot import envs as lerobot_envs
 from lerobot.configs import parser
 from lerobot.configs.policies import PreTrainedConfig
+from lerobot_efm.scripts import run_cli
 from lerobot.utils.constants import ACTION
 
 from ..viz.rollout_log import RolloutLogger
@@ -203,19 +203,7 @@ def rollout_main(cfg: RolloutConfig) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> list[dict]:
     """Console entry point; ``main([...])`` runs in-process with those CLI arguments."""
-    from lerobot.utils.import_utils import register_third_party_plugins
-    from lerobot.utils.utils import init_logging
-
-    init_logging()
-    register_third_party_plugins()
-    if argv is None:
-        return rollout_main()
-    saved = sys.argv
-    sys.argv = [saved[0] if saved else "rollout", *argv]  # parser.wrap and get_path_arg read sys.argv
-    try:
-        return rollout_main()
-    finally:
-        sys.argv = saved
+    return run_cli(rollout_main, argv, "rollout")
 
 
 if __name__ == "__main__":

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field, replace
+from typing import ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -52,10 +53,9 @@ from gymnasium import spaces
 
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.processor import PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 
-from ..point_reach import GoalImagesChannelFirstStep
+from ..goal_env import GoalEnvConfig
 from .tasks import (
     ALL, DOOR_TOL, POT_TOL, TASK_NAMES, TASKS, TRAY_TOL, KitchenState, KitchenTask, check_task, describe,
 )
@@ -306,8 +306,11 @@ class TalosKitchenEnv(gym.Env):
 
 @EnvConfig.register_subclass("talos_kitchen")
 @dataclass
-class TalosKitchenEnvConfig(EnvConfig):
+class TalosKitchenEnvConfig(GoalEnvConfig):
     """LeRobot config: ``--env.type=talos_kitchen --env.task=open_door`` (``all`` = whole suite)."""
+
+    GYM_ID: ClassVar[str] = GYM_ID
+    MODULE: ClassVar[str] = "lerobot_efm.envs.talos_kitchen.env"
 
     task: str | None = "open_door"
     fps: int = CONTROL_FPS
@@ -343,14 +346,6 @@ class TalosKitchenEnvConfig(EnvConfig):
         self.features[GOAL_IMAGE_KEY] = img
 
     @property
-    def package_name(self) -> str:
-        return "lerobot_efm.envs.talos_kitchen.env"  # imported by create_envs when GYM_ID is not registered
-
-    @property
-    def gym_id(self) -> str:
-        return GYM_ID  # one gym id; the task name goes through gym_kwargs
-
-    @property
     def gym_kwargs(self) -> dict:
         return {
             "task": self.task,
@@ -359,10 +354,6 @@ class TalosKitchenEnvConfig(EnvConfig):
             "render_mode": self.render_mode,
             "max_episode_steps": self.episode_length,
         }
-
-    def get_env_processors(self):
-        pre = PolicyProcessorPipeline(steps=[GoalImagesChannelFirstStep()])
-        return pre, PolicyProcessorPipeline(steps=[])
 
 
 if GYM_ID not in gym.registry:
