@@ -64,33 +64,59 @@ def _new_leg(p: np.ndarray, rng: np.random.Generator, wall: bool) -> list[np.nda
     return _route(p, target, rng, wall)
 
 
+class PointPlayOperator:
+    """Scripted play in PointReach, as an operator of ``lerobot-efm-record`` (see
+    :mod:`lerobot_efm.recording`): legs to random free targets with smooth heading noise, pauses
+    and detours. Deterministic given ``rng``."""
+
+    task = TASK
+
+    def __init__(self, env=None, rng: np.random.Generator | None = None, wall: bool | None = None):
+        self.env, self.rng = env, rng if rng is not None else np.random.default_rng()
+        self.wall = bool(getattr(env, "wall", True) if wall is None else wall)
+        self.done = False  # play never ends by itself
+
+    def start(self) -> np.ndarray:
+        """Forget the current leg and pick a random free start position."""
+        self.queue: list[np.ndarray] = []
+        self.pause, self.budget, self.speed, self.drift = 0, 0, 0.04, np.zeros(2)
+        return sample_free(self.rng, self.wall)
+
+    def reset(self) -> dict:
+        self.env.set_position(self.start())
+        return self.env.observe()
+
+    def act(self, obs: dict) -> np.ndarray:
+        p, rng = np.asarray(obs["agent_pos"], dtype=np.float64), self.rng
+        if self.pause > 0:  # idle: tiny jitter around the current position
+            self.pause -= 1
+            return np.clip(p + rng.normal(0.0, 0.003, 2), -1.0, 1.0)
+        if not self.queue:
+            self.queue, self.speed = _new_leg(p, rng, self.wall), rng.uniform(0.015, 0.05)
+            self.budget = 150
+        delta = self.queue[0] - p
+        dist = float(np.linalg.norm(delta))
+        self.budget -= 1
+        if dist < 0.04 or self.budget <= 0:  # waypoint reached (or hopeless): next one, maybe pause
+            self.queue.pop(0)
+            self.budget = 150
+            if rng.random() < 0.2:
+                self.pause = int(rng.integers(3, 20))
+        self.drift = 0.85 * self.drift + rng.normal(0.0, 0.25, 2)  # smooth heading noise -> curved paths
+        heading = delta / max(dist, 1e-6) + self.drift
+        heading /= max(float(np.linalg.norm(heading)), 1e-6)
+        cmd = p + heading * min(self.speed, max(dist, 0.01)) + rng.normal(0.0, 0.004, 2)
+        return np.clip(cmd, -1.0, 1.0)
+
+
 def play_episode(rng: np.random.Generator, length: int, wall: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Simulate one play episode; returns states (length, 2) and commanded positions (length, 2)."""
-    p = sample_free(rng, wall)
+    """Simulate one play episode without an env object (the point dynamics are a pure function);
+    returns states (length, 2) and commanded positions (length, 2)."""
+    operator = PointPlayOperator(rng=rng, wall=wall)
+    p = operator.start()
     states, actions = np.empty((length, 2)), np.empty((length, 2))
-    queue: list[np.ndarray] = []
-    pause, budget, speed, drift = 0, 0, 0.04, np.zeros(2)
     for t in range(length):
-        if pause > 0:  # idle: tiny jitter around the current position
-            pause -= 1
-            cmd = p + rng.normal(0.0, 0.003, 2)
-        else:
-            if not queue:
-                queue, speed = _new_leg(p, rng, wall), rng.uniform(0.015, 0.05)
-                budget = 150
-            delta = queue[0] - p
-            dist = float(np.linalg.norm(delta))
-            budget -= 1
-            if dist < 0.04 or budget <= 0:  # waypoint reached (or hopeless): next one, maybe pause
-                queue.pop(0)
-                budget = 150
-                if rng.random() < 0.2:
-                    pause = int(rng.integers(3, 20))
-            drift = 0.85 * drift + rng.normal(0.0, 0.25, 2)  # smooth heading noise -> curved paths
-            heading = delta / max(dist, 1e-6) + drift
-            heading /= max(float(np.linalg.norm(heading)), 1e-6)
-            cmd = p + heading * min(speed, max(dist, 0.01)) + rng.normal(0.0, 0.004, 2)
-        cmd = np.clip(cmd, -1.0, 1.0)
+        cmd = operator.act({"agent_pos": p})
         states[t], actions[t] = p, cmd
         p = move_point(p, cmd, wall)
     return states, actions

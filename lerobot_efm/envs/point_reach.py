@@ -182,6 +182,17 @@ class PointReachEnv(gym.Env):
                 raise ValueError(f"PointReach {name} {p.tolist()} is not a free position in [-1,1]^2")
         return start, goal
 
+    def observe(self) -> dict:
+        """The current observation (e.g. after :meth:`set_position`)."""
+        return self._obs()
+
+    def set_position(self, pos) -> None:
+        """Put the point at a free position (scripted operators choose where an episode starts)."""
+        pos = np.asarray(pos, dtype=np.float64)
+        if pos.shape != (2,) or np.any(np.abs(pos) > 1) or in_wall(pos, 0.0, self.wall):
+            raise ValueError(f"PointReach position {pos.tolist()} is not a free position in [-1,1]^2")
+        self.pos = pos
+
     def _obs(self) -> dict:
         obs = {"agent_pos": self.pos.astype(np.float32), GOAL_STATE_KEY: self.goal.astype(np.float32)}
         if self.obs_type == "pixels_state":

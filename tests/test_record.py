@@ -1,0 +1,104 @@
+"""``lerobot-efm-record``: scripted operators recorded as LeRobot datasets, safe to interrupt."""
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot_efm.envs.point_reach import PointReachEnvConfig
+from lerobot_efm.recording import make_raw_env, open_dataset, operator_class, record_episodes
+from lerobot_efm.synthetic import PointPlayOperator
+
+RECORD = [sys.executable, "-m", "lerobot_efm.scripts.record"]
+POINT_ARGS = ["--env.type=efm_point_reach", "--env.obs_type=pixels_state", "--env.image_size=32",
+              "--repo_id=local/rec_test"]
+ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
+
+
+def test_cli_records_video_dataset_and_resumes(tmp_path):
+    root = tmp_path / "ds"
+    args = [*RECORD, *POINT_ARGS, f"--root={root}", "--episode_length=30"]
+    subprocess.run([*args, "--episodes=2", "--seed=3"], check=True, env=ENV, capture_output=True, timeout=300)
+    ds = LeRobotDataset("local/rec_test", root=root)
+    assert ds.num_episodes == 2 and ds.num_frames == 60
+    assert ds.meta.features["observation.images.top"]["dtype"] == "video"
+    assert set(ds.meta.features) >= {"observation.state", "action", "observation.images.top"}
+    assert not any("goal" in k for k in ds.meta.features)  # goals come from hindsight relabelling
+    item = ds[35]
+    assert item["observation.images.top"].shape == (3, 32, 32)
+    # the recorded state is the point's position before the recorded action moved it
+    states = np.stack([ds[i]["observation.state"].numpy() for i in range(30)])
+    actions = np.stack([ds[i]["action"].numpy() for i in range(30)])
+    assert np.all(np.abs(actions) <= 1) and np.linalg.norm(np.diff(states, axis=0), axis=1).max() < 0.1
+    assert ds.meta.tasks.index.tolist() == ["play"]
+
+    again = subprocess.run([*args, "--episodes=1", "--seed=4"], env=ENV, capture_output=True, text=True)
+    assert again.returncode != 0 and "--resume=true" in again.stderr  # never overwrites a dataset
+    subprocess.run([*args, "--episodes=1", "--resume=true"], check=True, env=ENV, capture_output=True, timeout=300)
+    ds = LeRobotDataset("local/rec_test", root=root)
+    assert ds.num_episodes == 3 and ds.num_frames == 90
+    assert ds[89]["observation.images.top"].shape == (3, 32, 32)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_interrupt_keeps_saved_episodes(tmp_path, sig):
+    root = tmp_path / "ds"
+    proc = subprocess.Popen([*RECORD, *POINT_ARGS, f"--root={root}", "--episodes=1000", "--episode_length=40"],
+                            env=ENV, stderr=subprocess.PIPE, text=True)
+    seen = []
+    for line in proc.stderr:  # wait until two episodes are saved, then interrupt mid-recording
+        seen.append(line)
+        if "episode 1:" in line:
+            proc.send_signal(sig)
+            break
+    _, rest = proc.communicate(timeout=120)
+    assert proc.returncode == 130, "".join(seen) + rest
+    assert "interrupted" in rest
+    ds = LeRobotDataset("local/rec_test", root=root)
+    assert ds.num_episodes >= 2 and ds.num_frames == 40 * ds.num_episodes
+    assert ds[ds.num_frames - 1]["observation.images.top"].shape == (3, 32, 32)
+
+
+class _CrashOnce:
+    """Wraps the real point operator and raises in the middle of episode 1 (a simulated bug)."""
+
+    def __init__(self, env, rng):
+        self.inner, self.episode, self.frame = PointPlayOperator(env, rng), -1, 0
+        self.done = False
+
+    def reset(self):
+        self.episode, self.frame = self.episode + 1, 0
+        return self.inner.reset()
+
+    def act(self, obs):
+        self.frame += 1
+        if self.episode == 1 and self.frame == 10:
+            raise RuntimeError("operator bug")
+        return self.inner.act(obs)
+
+
+def test_crashing_episode_is_dropped_and_recording_goes_on(tmp_path):
+    cfg = PointReachEnvConfig()
+    env = make_raw_env(cfg)
+    op = _CrashOnce(env, np.random.default_rng(0))
+    env.reset(seed=0)
+    features = {"observation.state": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]},
+                "action": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]}}
+    ds = open_dataset(tmp_path / "ds", "local/crash", cfg.fps, features, False, "efm_point_reach", False)
+    try:
+        stats = record_episodes(ds, env, op, cfg.features_map, episodes=3, episode_length=25, task="play")
+    finally:
+        ds.finalize()
+    assert stats.saved == 2 and len(stats.failed) == 1 and "operator bug" in stats.failed[0]
+    ds = LeRobotDataset("local/crash", root=tmp_path / "ds")
+    assert ds.num_episodes == 2 and ds.num_frames == 50
+
+
+def test_unknown_operator_lists_the_registered_ones():
+    with pytest.raises(ValueError, match="--env.type=talos_kitchen --operator=play"):
+        operator_class("efm_point_reach", "expert")
