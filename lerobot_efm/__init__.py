@@ -5,7 +5,7 @@ Importing this package registers the policy types with LeRobot (and is what LeRo
 does through the ``lerobot_policy_efm`` distribution).
 """
 
-from . import envs, train_hook  # envs registers the efm_point_reach environment
+from . import envs, ogbench, train_hook  # envs and ogbench register the env types (OGBench itself loads lazily)
 from .configuration_efm import EFMACConfig, EFMASConfig, EFMConfig, EFMGCConfig, EFMPCConfig, EFMPSConfig
 from .hindsight import HindsightGoalDataset, HindsightSpec
 from .processor_efm import make_efm_pre_post_processors

@@ -1,0 +1,116 @@
+"""OGBench raw ``.npz`` -> LeRobot v3 dataset, so ``lerobot-train`` (and the hindsight wrapper) can use it.
+
+``observation.state`` = OGBench observation, ``action`` = OGBench action (pointmaze: a velocity command in
+[-1, 1]^2, so train EFM policies with ``action_mode="velocity"``). Episodes end at ``terminals`` rows (OGBench
+marks each episode's last row); every row becomes a frame. No goals, rewards or qpos/qvel are stored:
+goals come from hindsight relabelling, and for pointmaze the observation *is* qpos.
+
+FPS = 10: the point env's own ``render_fps`` (5 MuJoCo substeps of 0.02 s per action). It only sets timestamps.
+
+CLI: ``python -m lerobot_efm.ogbench.convert --npz X.npz --root DIR [--repo-id local/X] [--fps 10]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.utils.utils import SuppressProgressBars
+
+FPS = 10
+REQUIRED_KEYS = ("observations", "actions", "terminals")
+
+
+def load_raw(path: str | Path) -> dict[str, np.ndarray]:
+    """Read and validate an OGBench raw npz; errors name the file and the offending key."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"OGBench npz {path} does not exist")
+    with np.load(path) as npz:
+        missing = [k for k in REQUIRED_KEYS if k not in npz.files]
+        if missing:
+            raise KeyError(f"{path}: missing key(s) {missing}; OGBench raw datasets need {list(REQUIRED_KEYS)}, found {npz.files}")
+        data = {k: npz[k] for k in REQUIRED_KEYS}
+    check_raw(data, str(path))
+    return data
+
+
+def check_raw(data: dict[str, np.ndarray], source: str = "dataset") -> None:
+    obs, act, term = data["observations"], data["actions"], data["terminals"]
+    if obs.ndim != 2 or len(obs) == 0:
+        raise ValueError(f"{source}: 'observations' must be [N, obs_dim] with N > 0, got shape {obs.shape}")
+    n = len(obs)
+    if act.ndim != 2 or len(act) != n:
+        raise ValueError(f"{source}: 'actions' must be [N={n}, action_dim], got shape {act.shape}")
+    if term.shape != (n,):
+        raise ValueError(f"{source}: 'terminals' must be [N={n}], got shape {term.shape}")
+    if not term[-1]:
+        raise ValueError(f"{source}: 'terminals' must be 1 on the last row (end of the last episode)")
+    for key in ("observations", "actions"):
+        if not np.all(np.isfinite(data[key])):
+            raise ValueError(f"{source}: {key!r} holds non-finite values")
+
+
+def episode_bounds(terminals: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end) row ranges of the episodes, each ending on a terminal row."""
+    ends = np.flatnonzero(np.asarray(terminals).astype(bool)) + 1
+    starts = np.r_[0, ends[:-1]]
+    return [(int(s), int(e)) for s, e in zip(starts, ends, strict=True)]
+
+
+def ogbench_features(obs_dim: int, action_dim: int) -> dict:
+    planar = obs_dim == 2 and action_dim == 2
+    return {
+        "observation.state": {"dtype": "float32", "shape": (obs_dim,), "names": ["x", "y"] if planar else None},
+        "action": {"dtype": "float32", "shape": (action_dim,), "names": ["vx", "vy"] if planar else None},
+    }
+
+
+def convert_arrays(
+    data: dict[str, np.ndarray], root: str | Path, repo_id: str, fps: int = FPS, task: str = "play", source: str = "dataset"
+) -> LeRobotDataset:
+    """Write raw OGBench arrays as a new LeRobot dataset at ``root`` (must not exist); returns it reopened."""
+    check_raw(data, source)
+    if Path(root).exists():  # LeRobot would fail later with a bare mkdir error
+        raise FileExistsError(f"Dataset root {root} already exists; pick a new root or delete it")
+    obs = np.ascontiguousarray(data["observations"], dtype=np.float32)
+    act = np.ascontiguousarray(data["actions"], dtype=np.float32)
+    ds = LeRobotDataset.create(repo_id, fps=fps, features=ogbench_features(obs.shape[1], act.shape[1]), root=root, use_videos=False)
+    try:
+        for start, end in episode_bounds(data["terminals"]):
+            for t in range(start, end):
+                ds.add_frame({"observation.state": obs[t], "action": act[t], "task": task})
+            with SuppressProgressBars():
+                ds.save_episode()
+    finally:  # keep the already saved episodes readable even if conversion failed mid-way
+        if ds.has_pending_frames():
+            ds.clear_episode_buffer()
+        ds.finalize()
+    return LeRobotDataset(repo_id, root=root)
+
+
+def convert_npz(npz_path: str | Path, root: str | Path, repo_id: str | None = None, fps: int = FPS, task: str | None = None) -> LeRobotDataset:
+    """``<name>.npz`` -> LeRobot dataset ``local/<name>`` at ``root``; the task label defaults to the file stem."""
+    name = Path(npz_path).stem
+    return convert_arrays(load_raw(npz_path), root, repo_id or f"local/{name}", fps, task or name, str(npz_path))
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description="Convert an OGBench raw .npz dataset to a LeRobot v3 dataset.")
+    ap.add_argument("--npz", required=True, help="OGBench raw dataset (observations, actions, terminals)")
+    ap.add_argument("--root", required=True, help="output directory (must not exist)")
+    ap.add_argument("--repo-id", default=None, help="default: local/<npz stem>")
+    ap.add_argument("--fps", type=int, default=FPS)
+    ap.add_argument("--task", default=None, help="task label of every frame (default: npz stem)")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    ds = convert_npz(args.npz, args.root, args.repo_id, args.fps, args.task)
+    print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in {time.perf_counter() - t0:.1f} s")
+
+
+if __name__ == "__main__":
+    main()
