@@ -5,12 +5,13 @@ import numpy as np
 import pytest
 import rerun as rr
 import torch
-from conftest import REPO_ID
+from conftest import REPO_ID, tiny_config
 from rerun.experimental import RrdReader
 from test_lerobot_cli import train
 
+from lerobot_efm.envs.talos_kitchen.env import STATE_NAMES, TalosKitchenEnvConfig
 from lerobot_efm.scripts import log_dataset, rollout
-from lerobot_efm.viz import RolloutLogger, read_rrd
+from lerobot_efm.viz import RolloutLogger, get_env_viz, read_rrd
 
 
 @pytest.fixture(scope="module")
@@ -152,3 +153,82 @@ def test_log_dataset_with_video(video_dataset_root, tmp_path):
         for path in ("images/top", "goal_images/top", "traj_images/top/0", "traj_images/top/2"):
             row = data[f"sample_{n}/{path}"][0]
             assert row["Image:format"][0]["width"] == 32 and len(row["Image:buffer"][0]) == 32 * 32 * 3
+
+
+# --- Talos kitchen ------------------------------------------------------------------------------------
+
+
+def talos_bounds_stats() -> dict[str, dict[str, np.ndarray]]:
+    """MIN_MAX statistics from the talos_kitchen ranges (hand workspace box, rot6d in [-1, 1], gripper [0, 1],
+    door [-2, 0] rad, tray [-0.28, 0] m, pot inside the workspace, quaternion in [-1, 1]): an untrained policy
+    then commands poses all over the workspace instead of one point."""
+    from lerobot_efm.envs.talos_kitchen.control import WORKSPACE_HIGH, WORKSPACE_LOW
+
+    pose_lo = np.concatenate([WORKSPACE_LOW, -np.ones(6), [0.0]]).astype(np.float32)
+    pose_hi = np.concatenate([WORKSPACE_HIGH, np.ones(6), [1.0]]).astype(np.float32)
+    env_lo = np.concatenate([[-2.0, -0.28], WORKSPACE_LOW, -np.ones(4)]).astype(np.float32)
+    env_hi = np.concatenate([[0.0, 0.0], WORKSPACE_HIGH, np.ones(4)]).astype(np.float32)
+    return {"observation.state": {"min": np.tile(pose_lo, 2), "max": np.tile(pose_hi, 2)},
+            "observation.environment_state": {"min": env_lo, "max": env_hi},
+            "action": {"min": pose_lo, "max": pose_hi}}
+
+
+@pytest.fixture(scope="module")
+def talos_checkpoint(tmp_path_factory):
+    """An untrained tiny FM-AC for talos_kitchen (features from the env config, 32 px images), saved as
+    lerobot-train saves ``pretrained_model`` (config, weights, pre/post-processors with their stats)."""
+    from lerobot.policies import make_policy, make_pre_post_processors
+
+    out = tmp_path_factory.mktemp("talos_policy") / "pretrained_model"
+    cfg = tiny_config("efm_ac", use_rl=True)
+    policy = make_policy(cfg, env_cfg=TalosKitchenEnvConfig(image_size=32))
+    preprocessor, postprocessor = make_pre_post_processors(cfg, dataset_stats=talos_bounds_stats())
+    for part in (policy, preprocessor, postprocessor):
+        part.save_pretrained(out)
+    return out
+
+
+def test_talos_hand_slices_follow_the_state_names():
+    viz = get_env_viz("talos_kitchen")
+    state = np.arange(len(STATE_NAMES), dtype=np.float32)
+    points = viz.state_points(state)
+    np.testing.assert_array_equal(points["hand_commanded"], [STATE_NAMES.index(n) for n in ("cmd_x", "cmd_y", "cmd_z")])
+    np.testing.assert_array_equal(points["hand_measured"], [STATE_NAMES.index(n) for n in ("x", "y", "z")])
+    np.testing.assert_array_equal(viz.action_points(np.arange(20.0).reshape(2, 10)), [[0, 1, 2], [10, 11, 12]])
+
+
+def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
+    """lerobot-efm-rollout in the MuJoCo Talos kitchen: hand trajectories, predicted chunks and object states."""
+    output, length = tmp_path / "talos.rrd", 12
+    results = rollout.main([f"--policy.path={talos_checkpoint}", "--env.type=talos_kitchen", "--env.task=open_door",
+                            "--env.image_size=32", f"--env.episode_length={length}", "--n_episodes=1", f"--output={output}"])
+    assert [r["length"] for r in results] == [length]
+    data = read_rrd(output)
+    ep, steps = "episode_0", list(range(length + 1))  # every step plus the final observation
+    paths = {}
+    for name in ("hand_commanded", "hand_measured", "pot", "door_handle", "tray_handle"):
+        rows = temporal(data[f"{ep}/world/{name}"])
+        assert [r["step"] for r in rows] == steps, name
+        points = np.array([r["Points3D:positions"][0] for r in rows], dtype=np.float64)
+        assert points.shape == (length + 1, 3) and np.isfinite(points).all(), name
+        paths[name] = points
+        assert len(temporal(data[f"{ep}/world/goal_{name}"])) == length + 1
+        assert np.array(temporal(data[f"{ep}/world/{name}_path"])[-1]["LineStrips3D:strips"][0]).shape == (length + 1, 3)
+    # the points are the state's positions (not zero-padded slices of something else): the hand is above the
+    # floor near the robot, the pot on the table (z 0.85 m), the hand moves (an untrained policy commands poses)
+    assert (paths["hand_measured"][:, 2] > 0.5).all() and (paths["hand_commanded"][:, 2] > 0.5).all()
+    assert np.abs(paths["pot"][:, 2] - 0.85).max() < 0.05
+    assert np.ptp(paths["hand_commanded"], axis=0).max() > 1e-3
+    chunks = temporal(data[f"{ep}/world/action_chunk"])
+    assert [r["step"] for r in chunks] == list(range(0, length, 6))  # n_action_steps = 6
+    for row in chunks:
+        strip = np.array(row["LineStrips3D:strips"][0], dtype=np.float64)
+        assert strip.shape == (8, 3) and np.isfinite(strip).all()  # L_a waypoints of the hand position command
+    for name in ("door", "tray", "pot_x", "pot_y", "pot_z"):
+        assert [r["step"] for r in temporal(data[f"{ep}/objects/{name}"])] == steps, name
+        assert len(temporal(data[f"{ep}/objects/goal_{name}"])) == length + 1
+    door_goal = scalars(data[f"{ep}/objects/goal_door"])
+    assert (door_goal < -0.5).all()  # open_door: the goal has the door open, the start has it closed
+    assert abs(scalars(data[f"{ep}/objects/door"])[0, 0]) < 0.05
+    assert "scene/table" in data and "scene/workspace" in data
+    assert len(RrdReader(output).blueprints()) == 1

@@ -79,8 +79,8 @@ def record(cfg: RecordConfig):
     return stats
 
 
-def main(argv: list[str] | None = None):
-    return run_cli(record, argv, "lerobot-efm-record")
+def main(argv: list[str] | None = None) -> None:
+    run_cli(record, argv, "lerobot-efm-record")  # console scripts print a returned object: return nothing
 
 
 if __name__ == "__main__":

@@ -145,7 +145,7 @@ def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, 
         obs = env_preprocessor(preprocess_observation(observation))
         log.log_observation(step, obs)
     log.end_episode(step, success)
-    return {"episode": index, "seed": seed, "length": step, "success": success, "sum_reward": reward_sum, "task": task[0]}
+    return {"episode": index, "seed": seed, "length": step, "success": success, "sum_reward": reward_sum, "task": task}
 
 
 def rollout(cfg: RolloutConfig) -> list[dict]:

@@ -7,9 +7,11 @@ sequence) and ``time`` (``step / fps`` seconds, a duration). Entity paths (``ep`
 ``ep/camera/render``               ``env.render()`` frame (optional)
 ``ep/camera/<cam>``                ``observation.images.<cam>`` as seen by the policy (before normalisation)
 ``ep/goal/<cam>``                  ``observation.goal.images.<cam>`` (goal image)
-``ep/world/<name>``                3-D point of the agent (``EnvViz.state_points``; point env: ``agent``)
+``ep/world/<name>``                3-D point of the agent (``EnvViz.state_points``; point env: ``agent``; Talos:
+                                   ``hand_commanded``, ``hand_measured``) or of an object (``EnvViz.object_points``;
+                                   Talos: ``pot``, ``door_handle``, ``tray_handle``)
 ``ep/world/<name>_path``           the trajectory so far (line strip)
-``ep/world/goal_<name>``           the goal point (from ``observation.goal.state``)
+``ep/world/goal_<name>``           the goal point (from ``observation.goal.state`` / ``.goal.environment_state``)
 ``ep/world/action_chunk``          at each replanning: the predicted action chunk (``EnvViz.action_points``)
 ``ep/world/obs_plan``              planned observations ``obs_plan`` (FM-PC/PS/AS), when they are low-dimensional
 ``ep/world/candidates``            FM-PS/FM-AS: every candidate plan/chunk, the chosen one thick and red
@@ -18,12 +20,15 @@ sequence) and ``time`` (``step / fps`` seconds, a duration). Entity paths (``ep`
 ``ep/distance/critic``             critic estimate of the steps to the goal, at each replanning
 ``ep/distance/true_remaining``     steps actually left, back-filled once the episode succeeded
 ``ep/distance/candidates``         FM-PS/FM-AS: the critic score of every candidate
-``ep/obs/<key>``                   vector observations (``observation.state``, ``observation.environment_state``...)
+``ep/obs/<key>``                   vector observations (``observation.state``, ``observation.environment_state``...),
+                                   series named by ``EnvViz.dim_names``
+``ep/objects/<name>``              object states (``EnvViz.object_series``; Talos: door, tray, pot_x/y/z), the
+                                   goal's as ``ep/objects/goal_<name>``
 ``ep/goal_obs/<key>``              vector goal observations (``observation.goal.state``...)
 ``ep/reward``, ``ep/success``      per step
 ``ep/info/<key>``                  numeric ``info`` entries of the env (point env: ``distance``)
 ``ep/events``                      text log: replans, end of episode
-``scene/...``                      static env geometry (point env: arena and wall)
+``scene/...``                      static env geometry (point env: arena and wall; Talos: table, cabinet, workspace)
 =================================  ==========================================================================
 
 Env-specific geometry is a hook: :func:`register_env_viz` maps an env type (``--env.type``) to an
@@ -32,8 +37,8 @@ Env-specific geometry is a hook: :func:`register_env_viz` maps an env type (``--
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +48,7 @@ import torch
 
 STATE_KEY = "observation.state"
 GOAL_STATE_KEY = "observation.goal.state"
+ENV_STATE_KEY = "observation.environment_state"
 IMAGE_PREFIX = "observation.images."
 GOAL_IMAGE_PREFIX = "observation.goal.images."
 GOAL_PREFIX = "observation.goal."
@@ -53,6 +59,9 @@ CHUNK_COLOR = (40, 90, 230)
 PLAN_COLOR = (240, 150, 20)
 GOAL_COLOR = (40, 170, 60)
 AGENT_COLOR = (210, 40, 40)
+# the state_points / object_points of an env, in order (first: the agent, as AGENT_COLOR)
+POINT_COLORS = ((210, 40, 40), (150, 60, 200), (230, 140, 20), (20, 160, 170), (140, 90, 40), (200, 60, 140))
+OBJECT_COLOR_OFFSET = 2  # objects take the palette after the (usually two) agent points
 
 
 # --------------------------------------------------------------------------------------------------
@@ -71,17 +80,30 @@ def pad3(x: np.ndarray) -> np.ndarray:
 
 @dataclass
 class EnvViz:
-    """How to draw an env in 3-D.
+    """How to draw an env in 3-D (and name its vectors in the plots).
 
     state_points: (..., S) unnormalised ``observation.state`` -> {name: (..., 3)} positions to draw
         (also applied to ``observation.goal.state`` and to planned states).
     action_points: (..., A) unnormalised actions -> (..., 3), or None when actions are not positions.
     scene: optional callback ``scene(rec)`` logging static geometry under ``scene/``.
+    object_points: other vector observation key (e.g. ``observation.environment_state``) -> callback
+        (D,) -> {name: (3,)}: objects drawn at ``ep/world/<name>`` with their path (goal: ``goal_<name>``).
+    object_series: observation key -> callback (D,) -> {name: float}: object states plotted under
+        ``ep/objects/<name>``, the goal's under ``ep/objects/goal_<name>`` (names are entity path parts).
+    dim_names: observation key -> one name per dimension, the legend of ``ep/obs/<key>`` series (and, prefixed
+        with ``goal``, of its goal mirror).
+    eye: ``(position, look_target)`` of the 3-D view's camera (z up), None for rerun's default.
+    object_series_title: the name of the plot of ``object_series``.
     """
 
     state_points: Callable[[np.ndarray], dict[str, np.ndarray]]
     action_points: Callable[[np.ndarray], np.ndarray | None] | None = None
     scene: Callable[[rr.RecordingStream], None] | None = None
+    object_points: dict[str, Callable[[np.ndarray], dict[str, np.ndarray]]] = field(default_factory=dict)
+    object_series: dict[str, Callable[[np.ndarray], dict[str, float]]] = field(default_factory=dict)
+    dim_names: dict[str, Sequence[str]] = field(default_factory=dict)
+    eye: tuple[Sequence[float], Sequence[float]] | None = None
+    object_series_title: str = "objects (thin: goal)"
 
 
 def _default_state_points(state: np.ndarray) -> dict[str, np.ndarray]:
@@ -105,20 +127,98 @@ POINT_REACH_VIZ = EnvViz(
     state_points=lambda s: {"agent": pad3(np.asarray(s)[..., :2])},
     action_points=lambda a: pad3(np.asarray(a)[..., :2]),  # absolute position commands
     scene=_point_reach_scene,
+    dim_names={STATE_KEY: ("x", "y")},
+    eye=((0.0, -1.5, 2.3), (0.0, -0.1, 0.0)),  # from above, slightly tilted: the 2-D arena stays readable
 )
 
 
-def hand_points(commanded: slice = slice(0, 3), measured: slice = slice(9, 12)) -> EnvViz:
-    """An EnvViz for arms whose state holds the commanded and measured hand positions (e.g. Talos:
-    ``observation.state[0:3]`` and ``[9:12]``) and whose actions start with the hand position command."""
-    return EnvViz(
-        state_points=lambda s: {"hand_commanded": pad3(np.asarray(s)[..., commanded]),
-                                "hand_measured": pad3(np.asarray(s)[..., measured])},
-        action_points=lambda a: pad3(np.asarray(a)[..., commanded]),
-    )
+def hand_points(commanded: slice = slice(0, 3), measured: slice | None = None, action: slice | None = None) -> EnvViz:
+    """An EnvViz for arms whose state holds the commanded and (optionally) measured hand positions and whose
+    actions hold the hand position command at ``action`` (default: the ``commanded`` slice of the state).
+    Talos: :data:`TALOS_KITCHEN_VIZ` (``observation.state[0:3]`` commanded, ``[10:13]`` measured)."""
+    action = commanded if action is None else action
+
+    def state_points(s: np.ndarray) -> dict[str, np.ndarray]:
+        s = np.asarray(s)
+        points = {"hand_commanded": pad3(s[..., commanded])}
+        if measured is not None:
+            points["hand_measured"] = pad3(s[..., measured])
+        return points
+
+    return EnvViz(state_points=state_points, action_points=lambda a: pad3(np.asarray(a)[..., action]))
 
 
-_ENV_VIZ: dict[str, EnvViz] = {"efm_point_reach": POINT_REACH_VIZ}
+# --- Talos kitchen ------------------------------------------------------------------------------------
+
+
+def _talos_layout() -> dict[str, int]:
+    """Where the hand positions and object states sit in the talos_kitchen vectors (from the env's names)."""
+    from lerobot_efm.envs.talos_kitchen.env import ENV_STATE_NAMES, STATE_NAMES
+
+    return {"cmd": STATE_NAMES.index("cmd_x"), "measured": STATE_NAMES.index("x"), "door": ENV_STATE_NAMES.index("door"),
+            "tray": ENV_STATE_NAMES.index("tray"), "pot": ENV_STATE_NAMES.index("pot_x")}
+
+
+def _talos_objects(env_state: np.ndarray) -> dict[str, np.ndarray]:
+    """Door handle, tray handle (where the door angle / tray slide put them) and pot base centre, in 3-D."""
+    from lerobot_efm.envs.talos_kitchen import scene
+
+    i, e = _talos_layout(), np.asarray(env_state, np.float64).reshape(-1)
+    # the handle helpers read only the constants of the scene when the angle / slide is given
+    return {"door_handle": scene.door_handle_pos(None, None, angle=float(e[i["door"]])).astype(np.float32),
+            "tray_handle": scene.tray_handle_pos(None, None, slide=float(e[i["tray"]])).astype(np.float32),
+            "pot": e[i["pot"]: i["pot"] + 3].astype(np.float32)}
+
+
+def _talos_series(env_state: np.ndarray) -> dict[str, float]:
+    i, e = _talos_layout(), np.asarray(env_state, np.float64).reshape(-1)
+    pot = e[i["pot"]: i["pot"] + 3]
+    return {"door": e[i["door"]], "tray": e[i["tray"]], "pot_x": pot[0], "pot_y": pot[1], "pot_z": pot[2]}
+
+
+def _box_outline(lo, hi) -> list[list[float]]:
+    """The 12 edges of an axis-aligned box as 2-point strips."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    corners = np.array([[(lo, hi)[a][0], (lo, hi)[b][1], (lo, hi)[c][2]] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+    edges = [(i, j) for i in range(8) for j in range(i + 1, 8) if bin(i ^ j).count("1") == 1]
+    return [[corners[i].tolist(), corners[j].tolist()] for i, j in edges]
+
+
+def _talos_scene(rec: rr.RecordingStream) -> None:
+    """Table top, cabinet front and door hinge, and the hand workspace box (static, from the scene constants)."""
+    from lerobot_efm.envs.talos_kitchen import control, scene
+
+    (tx, ty), (hx, hy), z = scene.TABLE_CENTER, scene.TABLE_HALF, scene.TABLE_TOP
+    table = [[tx - hx, ty - hy, z], [tx + hx, ty - hy, z], [tx + hx, ty + hy, z], [tx - hx, ty + hy, z], [tx - hx, ty - hy, z]]
+    x0, y0, y1 = scene.CAB_X0, scene.CAB_Y0, scene.CAB_Y1
+    cabinet = [[x0, y0, 0.0], [x0, y1, 0.0], [x0, y1, 1.25], [x0, y0, 1.25], [x0, y0, 0.0]]
+    hinge = [[scene.DOOR_HINGE[0], scene.DOOR_HINGE[1], 0.92], [scene.DOOR_HINGE[0], scene.DOOR_HINGE[1], 1.25]]
+    rec.log("scene/table", rr.LineStrips3D([table], colors=[(150, 110, 60)], radii=0.006), static=True)
+    rec.log("scene/cabinet", rr.LineStrips3D([cabinet, hinge], colors=[(110, 110, 110)], radii=0.005), static=True)
+    rec.log("scene/workspace", rr.LineStrips3D(_box_outline(control.WORKSPACE_LOW, control.WORKSPACE_HIGH),
+                                               colors=[(200, 200, 200)], radii=0.002), static=True)
+    rec.log("scene/robot_base", rr.Points3D([[0.0, 0.0, scene.BASE_HEIGHT]], colors=[(90, 90, 90)], radii=0.05,
+                                            labels=["Talos base"]), static=True)
+
+
+def _talos_kitchen_viz() -> EnvViz:
+    from lerobot_efm.envs.talos_kitchen.env import ENV_STATE_NAMES, STATE_NAMES
+
+    i = _talos_layout()
+    viz = hand_points(commanded=slice(i["cmd"], i["cmd"] + 3), measured=slice(i["measured"], i["measured"] + 3),
+                      action=slice(0, 3))  # actions: position (3) + rot6d (6) + gripper (1)
+    viz.scene = _talos_scene
+    viz.object_points = {ENV_STATE_KEY: _talos_objects}
+    viz.object_series = {ENV_STATE_KEY: _talos_series}
+    viz.object_series_title = "door (rad), tray, pot (m); thin: goal"
+    viz.dim_names = {STATE_KEY: STATE_NAMES, ENV_STATE_KEY: ENV_STATE_NAMES}
+    viz.eye = ((-0.55, -1.25, 1.75), (0.45, 0.1, 0.95))  # behind the robot's right shoulder, facing the kitchen
+    return viz
+
+
+TALOS_KITCHEN_VIZ = _talos_kitchen_viz()
+
+_ENV_VIZ: dict[str, EnvViz] = {"efm_point_reach": POINT_REACH_VIZ, "talos_kitchen": TALOS_KITCHEN_VIZ}
 
 
 def register_env_viz(env_type: str, viz: EnvViz) -> None:
@@ -269,9 +369,44 @@ class RolloutLogger:
             self.cameras.add("render")
             self.rec.log(f"{self.ep}/camera/render", rr.Image(img))
 
+    def _dim_names(self, key: str, size: int) -> list[str]:
+        """Legend of the series of observation ``key`` (its goal mirror: the observation's names, 'goal ' first)."""
+        base, prefix = key, ""
+        if key.startswith(GOAL_PREFIX):
+            base, prefix = "observation." + key[len(GOAL_PREFIX):], "goal "
+        names = self.viz.dim_names.get(base)
+        if names is None or len(names) != size:
+            return [f"{prefix}{i}" for i in range(size)]
+        return [f"{prefix}{n}" for n in names]
+
+    def _log_points(self, points: dict[str, np.ndarray], color_offset: int = 0) -> None:
+        """Each named 3-D point at ``ep/world/<name>`` and its path so far at ``ep/world/<name>_path``."""
+        paths = self.episodes[-1]["path"]
+        for j, (name, p) in enumerate(points.items()):
+            color = POINT_COLORS[(color_offset + j) % len(POINT_COLORS)]
+            paths.setdefault(name, []).append(np.asarray(p, np.float32).reshape(3))
+            self.rec.log(f"{self.ep}/world/{name}", rr.Points3D([paths[name][-1]], colors=[color], radii=0.03))
+            self.rec.log(f"{self.ep}/world/{name}_path", rr.LineStrips3D([np.stack(paths[name])], colors=[color], radii=0.006))
+
+    def _log_goal_points(self, points: dict[str, np.ndarray]) -> None:
+        for name, p in points.items():
+            self.rec.log(f"{self.ep}/world/goal_{name}", rr.Points3D([np.asarray(p).reshape(3)], colors=[GOAL_COLOR], radii=0.04))
+
+    def _log_object_series(self, values: dict[str, float], goal: bool) -> None:
+        """Object states (door angle...) under ``ep/objects/<name>``; the goal's, thin, under ``goal_<name>``."""
+        for j, (name, v) in enumerate(values.items()):
+            path = f"{self.ep}/objects/{'goal_' if goal else ''}{name}"
+            if path not in self._static_done:
+                self._static_done.add(path)
+                color = POINT_COLORS[(OBJECT_COLOR_OFFSET + j) % len(POINT_COLORS)]
+                self.rec.log(path, rr.SeriesLines(names=[f"goal {name}" if goal else name], colors=[color],
+                                                  widths=[1.0 if goal else 2.5]), static=True)
+            self.rec.log(path, rr.Scalars([float(v)]))
+
     def log_observation(self, step: int, observation: dict) -> None:
         self.set_step(step)
         ep = self.ep
+        vectors: dict[str, np.ndarray] = {}
         for key, value in observation.items():
             if not isinstance(value, (torch.Tensor, np.ndarray)):
                 continue
@@ -288,22 +423,27 @@ class RolloutLogger:
                     self.cameras.add(cam)
                     self.rec.log(f"{ep}/camera/{cam}", rr.Image(img))
             elif key.startswith("observation.") and to_numpy(value).ndim <= 2:
-                vec = to_numpy(value).reshape(-1)
+                vec = vectors[key] = to_numpy(value).reshape(-1)
                 if key.startswith(GOAL_PREFIX):
-                    self._scalars(f"{ep}/goal_obs/{key[len(GOAL_PREFIX):]}", vec)
+                    self._scalars(f"{ep}/goal_obs/{key[len(GOAL_PREFIX):]}", vec, self._dim_names(key, len(vec)))
                 else:
-                    self._scalars(f"{ep}/obs/{key[len('observation.'):]}", vec)
-        if STATE_KEY in observation:
-            state = to_numpy(observation[STATE_KEY]).reshape(-1)
-            paths = self.episodes[-1]["path"]
-            for name, p in self.viz.state_points(state).items():
-                paths.setdefault(name, []).append(np.asarray(p, np.float32).reshape(3))
-                self.rec.log(f"{ep}/world/{name}", rr.Points3D([paths[name][-1]], colors=[AGENT_COLOR], radii=0.03))
-                self.rec.log(f"{ep}/world/{name}_path", rr.LineStrips3D([np.stack(paths[name])], colors=[AGENT_COLOR], radii=0.006))
-        if GOAL_STATE_KEY in observation:
-            goal = to_numpy(observation[GOAL_STATE_KEY]).reshape(-1)
-            for name, p in self.viz.state_points(goal).items():
-                self.rec.log(f"{ep}/world/goal_{name}", rr.Points3D([np.asarray(p).reshape(3)], colors=[GOAL_COLOR], radii=0.04))
+                    self._scalars(f"{ep}/obs/{key[len('observation.'):]}", vec, self._dim_names(key, len(vec)))
+        if STATE_KEY in vectors:
+            self._log_points(self.viz.state_points(vectors[STATE_KEY]))
+        if GOAL_STATE_KEY in vectors:
+            self._log_goal_points(self.viz.state_points(vectors[GOAL_STATE_KEY]))
+        for key, points in self.viz.object_points.items():
+            goal_key = GOAL_PREFIX + key[len("observation."):]
+            if key in vectors:
+                self._log_points(points(vectors[key]), OBJECT_COLOR_OFFSET)
+            if goal_key in vectors:
+                self._log_goal_points(points(vectors[goal_key]))
+        for key, series in self.viz.object_series.items():
+            goal_key = GOAL_PREFIX + key[len("observation."):]
+            if key in vectors:
+                self._log_object_series(series(vectors[key]), goal=False)
+            if goal_key in vectors:
+                self._log_object_series(series(vectors[goal_key]), goal=True)
 
     def log_action(self, step: int, action) -> None:
         self.set_step(step)
@@ -387,24 +527,34 @@ class RolloutLogger:
 
     # --- layout ------------------------------------------------------------------------------------
     def blueprint(self) -> rrb.Blueprint:
+        """One tab per episode: cameras and goal images | the 3-D world | plots, events below. The side panels
+        start collapsed and the time cursor at the end of the recording (the whole trajectory shows)."""
+        eye = None if self.viz.eye is None else rrb.EyeControls3D(position=self.viz.eye[0], look_target=self.viz.eye[1],
+                                                                  eye_up=(0.0, 0.0, 1.0))
         tabs = []
         for e in self.episodes:
             ep = f"episode_{e['index']}"
             images = [rrb.Spatial2DView(origin=f"/{ep}/camera/{c}", name=c) for c in sorted(self.cameras)]
             images += [rrb.Spatial2DView(origin=f"/{ep}/goal/{c}", name=f"goal {c}") for c in sorted(self.goal_cameras)]
-            world = rrb.Spatial3DView(origin="/", contents=["/scene/**", f"/{ep}/world/**"], name="world")
-            series = rrb.Vertical(
+            world = rrb.Spatial3DView(origin="/", contents=["/scene/**", f"/{ep}/world/**"], name="world", eye_controls=eye)
+            plots = [
                 rrb.TimeSeriesView(origin=f"/{ep}/distance", name="distance to goal (steps)"),
-                rrb.TimeSeriesView(origin=f"/{ep}", contents=[f"/{ep}/action", f"/{ep}/action_chunk/**"], name="actions & chunks"),
-                rrb.TimeSeriesView(origin=f"/{ep}", contents=[f"/{ep}/obs/**", f"/{ep}/goal_obs/**", f"/{ep}/reward",
-                                                              f"/{ep}/success", f"/{ep}/info/**"], name="state, reward, success"),
-            )
+                rrb.TimeSeriesView(origin=f"/{ep}", contents=[f"/{ep}/action", f"/{ep}/action_chunk/**"], name="actions & chunks",
+                                   plot_legend=rrb.PlotLegend(visible=False)),  # one series per dim and chunk: too long
+            ]
+            if self.viz.object_series:
+                plots.append(rrb.TimeSeriesView(origin=f"/{ep}/objects", name=self.viz.object_series_title))
+            plots.append(rrb.TimeSeriesView(origin=f"/{ep}", contents=[f"/{ep}/obs/**", f"/{ep}/goal_obs/**", f"/{ep}/reward",
+                                                                      f"/{ep}/success", f"/{ep}/info/**"],
+                                            name="state, reward, success", plot_legend=rrb.PlotLegend(visible=False)))
             left = [rrb.Vertical(*images)] if images else []
-            columns = [*left, world, series]
-            tabs.append(rrb.Vertical(rrb.Horizontal(*columns), rrb.TextLogView(origin=f"/{ep}/events", name="events"),
-                                     row_shares=[5, 1], name=ep))
+            columns = [*left, world, rrb.Vertical(*plots)]
+            shares = ([1] if left else []) + [2, 1.4]
+            tabs.append(rrb.Vertical(rrb.Horizontal(*columns, column_shares=shares),
+                                     rrb.TextLogView(origin=f"/{ep}/events", name="events"), row_shares=[6, 1], name=ep))
         root = rrb.Tabs(*tabs) if len(tabs) > 1 else (tabs[0] if tabs else rrb.Spatial3DView(origin="/"))
-        return rrb.Blueprint(root, rrb.TimePanel(timeline="step"), collapse_panels=False)
+        return rrb.Blueprint(root, rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+                             rrb.TimePanel(timeline="step", state="collapsed", play_state="following"))
 
 
 # --------------------------------------------------------------------------------------------------
