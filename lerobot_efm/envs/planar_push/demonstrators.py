@@ -1,0 +1,420 @@
+"""Scripted demonstrators of the planar push datasets (the paper's three human behaviours) and their recorder.
+
+* :class:`ExpertReachGoal` pushes the disc from a random start along a grid shortest path to a maze corner
+  (or, given ``goal``, to any 4-D goal: disc first, then the effector around it; it solves the eval pairs).
+* :class:`PlayFullSpace` pushes the disc to random targets anywhere, with detours, effector-only wandering
+  and pauses; it never finishes.
+* :class:`PlayPartitioned` does the same inside one region per episode (``maze.REGION_NAMES``): the disc
+  centre never leaves its region, so reaching a far goal needs pieces of several episodes (stitching).
+
+All follow the operator protocol of ``lerobot-efm-record``: ``reset() -> obs``, ``act(obs) -> command``,
+``done``. Pushing is closed-loop: the effector stages behind the disc w.r.t. the next path waypoint (moving
+around the disc when needed), then pushes with a command ``lead`` past the contact point; the static disc
+friction (2) equals the spring force at 0.04 of lead, so ``lead = remaining + 0.035`` stops on the target.
+
+CLI: ``python -m lerobot_efm.envs.planar_push.demonstrators --behaviour expert --root DIR --frames 47000``
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .maze import (
+    ARENA, EFFECTOR_CLEARANCE, EFFECTOR_RADIUS, GRID_COORDS, MAZE_CELLS, OBJECT_CLEARANCE, OBJECT_RADIUS,
+    REGION_NAMES, distance_field, free_disc_cells, free_mask, grid_index, grid_path, grid_point, inside_region,
+    lookahead, maze_cell_of, nearest_free, segment_clear, wall_distance,
+)
+
+PUSH_GAP = OBJECT_RADIUS + EFFECTOR_RADIUS  # centre distance at contact
+AVOID = PUSH_GAP + 0.015  # effector centres keep this far from the disc centre when going around it
+STAGE = PUSH_GAP + 0.04  # staging distance behind the disc
+ALIGN_COS = np.cos(np.deg2rad(22.0))
+STATIC_LEAD = 0.035  # just under 0.04 = friction 2 / KP 50: a push with this lead stalls
+MAX_LEAD = 0.1  # full push: spring force 5 (the clip)
+CORNER = ARENA - OBJECT_RADIUS - 0.03
+CORNERS = np.array([[-CORNER, -CORNER], [CORNER, -CORNER], [-CORNER, CORNER], [CORNER, CORNER]])
+START_MARGIN = 0.16  # random disc starts/targets: room for the effector between disc and wall
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-9 else np.array([1.0, 0.0])
+
+
+def _rot(u: np.ndarray, deg: float) -> np.ndarray:
+    a = np.deg2rad(deg)
+    c, s = np.cos(a), np.sin(a)
+    return np.array([c * u[0] - s * u[1], s * u[0] + c * u[1]])
+
+
+class Pusher:
+    """Closed-loop disc pushing and effector navigation shared by the demonstrators.
+
+    ``region`` confines disc paths (and targets sampled by :meth:`sample_disc`) to one maze region.
+    """
+
+    def __init__(self, region: int | None = None, region_margin: float = 0.06):
+        self.region = region
+        self.obj_free = free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE, region, region_margin)
+        self.start_free = free_mask(OBJECT_RADIUS + START_MARGIN, region, region_margin + 0.04)
+        self.eff_free = free_mask(EFFECTOR_RADIUS + 0.01)
+        self._obj_fields: dict[tuple[int, int], np.ndarray] = {}
+        self._eff_plan: tuple | None = None
+
+    # ---------------------------------------------------------------- sampling
+    def sample_disc(self, rng: np.random.Generator) -> np.ndarray:
+        idx = np.argwhere(self.start_free)
+        i, j = idx[rng.integers(len(idx))]
+        return grid_point(i, j) + rng.uniform(-0.02, 0.02, 2)
+
+    def sample_effector(self, rng: np.random.Generator, obj: np.ndarray, near: float | None = None) -> np.ndarray:
+        """A free effector position clear of the disc (within ``near`` of it if given)."""
+        for _ in range(1000):
+            if near is None:
+                p = rng.uniform(-ARENA, ARENA, 2)
+            else:
+                p = obj + _rot(np.array([rng.uniform(PUSH_GAP + 0.04, near), 0.0]), rng.uniform(0, 360))
+            if wall_distance(p) >= EFFECTOR_RADIUS + EFFECTOR_CLEARANCE and np.linalg.norm(p - obj) > AVOID + 0.02:
+                return p
+        raise RuntimeError(f"no free effector position around disc {obj.tolist()}")
+
+    def path_length(self, obj: np.ndarray, target: np.ndarray) -> float:
+        field = self._field(target)
+        return float(field[nearest_free(self.obj_free, obj)])
+
+    # ---------------------------------------------------------------- control
+    def _field(self, target: np.ndarray) -> np.ndarray:
+        key = nearest_free(self.obj_free, target)
+        if key not in self._obj_fields:
+            self._obj_fields[key] = distance_field(self.obj_free, grid_point(*key))
+        return self._obj_fields[key]
+
+    def _push_direction(self, obj: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Unit push direction (rotated until there is room behind the disc) and whether it aims at the target."""
+        direct = np.linalg.norm(target - obj) < 0.3 and segment_clear(obj, target, OBJECT_RADIUS + 0.005)
+        if direct:
+            waypoint = target
+        else:
+            path = grid_path(self._field(target), obj, self.obj_free)
+            waypoint = lookahead(path, obj, OBJECT_RADIUS + 0.01, 0.35)
+        u = _unit(waypoint - obj)
+        for deg in (0, 15, -15, 30, -30, 45, -45, 60, -60, 75, -75, 90, -90):  # room behind the disc?
+            v = _rot(u, deg)
+            if wall_distance(obj - v * STAGE) >= EFFECTOR_RADIUS + 0.005:
+                return v, direct
+        return u, direct
+
+    def move_effector(self, eff: np.ndarray, obj: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Command toward ``target`` that goes around the disc and the walls (grid path when blocked)."""
+        if segment_clear(eff, target, EFFECTOR_RADIUS + 0.005, obj, AVOID):
+            return target.copy()
+        key = (grid_index(obj), grid_index(target))
+        if self._eff_plan is None or self._eff_plan[0] != key:
+            d = np.linalg.norm(np.stack(np.meshgrid(GRID_COORDS, GRID_COORDS, indexing="ij"), -1) - obj, axis=-1)
+            free = self.eff_free & (d > AVOID)
+            try:
+                self._eff_plan = (key, free, distance_field(free, target))
+            except ValueError:  # nothing free: back off from the disc
+                return eff + _unit(eff - obj) * 0.1
+        _, free, field = self._eff_plan
+        try:
+            path = grid_path(field, eff, free)
+        except ValueError:
+            return eff + _unit(eff - obj) * 0.1
+        return lookahead(path, eff, EFFECTOR_RADIUS + 0.005, 0.4, obj, AVOID)
+
+    def push(self, state: np.ndarray, target: np.ndarray, final: bool, lead: float = MAX_LEAD) -> np.ndarray:
+        """Command that moves the disc toward ``target`` (stopping on it when ``final``)."""
+        eff, obj = state[:2], state[2:]
+        u, direct = self._push_direction(obj, target)
+        to_obj = obj - eff
+        dist = float(np.linalg.norm(to_obj))
+        if dist < PUSH_GAP + 0.06 and float(np.dot(to_obj / max(dist, 1e-9), u)) > ALIGN_COS:
+            if final and direct:  # slow down near the target, stall on it (no overshoot into a wall)
+                lead = float(np.clip(0.6 * np.dot(target - obj, u) + STATIC_LEAD + 0.003, 0.0, lead))
+            return obj - u * PUSH_GAP + u * lead
+        return self.move_effector(eff, obj, obj - u * STAGE)
+
+
+def _clip(cmd: np.ndarray) -> np.ndarray:
+    return np.clip(cmd, -ARENA, ARENA).astype(np.float32)
+
+
+class ExpertReachGoal:
+    """Pushes the disc along a shortest path to a random corner at least ``min_path`` away (the paper's
+    "Expert reach goal"); ``done`` once it rests there. With ``goal`` (4-D [eff, obj]) it keeps the env's
+    current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
+
+    def __init__(self, env, rng: np.random.Generator, goal=None, noise: float = 0.003, min_path: float = 0.8,
+                 tolerance: float = 0.025):
+        self.env, self.rng, self.noise, self.min_path, self.tol = env, rng, float(noise), float(min_path), tolerance
+        self.fixed_goal = None if goal is None else np.asarray(goal, dtype=np.float64).reshape(4)
+        self.pusher = Pusher()
+        self.target = CORNERS[0].copy()
+        self.effector_goal: np.ndarray | None = None
+        self._pushing = True
+        self._done = False
+
+    def reset(self) -> dict:
+        self._done, self._pushing = False, True
+        if self.fixed_goal is not None:
+            self.effector_goal, self.target = self.fixed_goal[:2].copy(), self.fixed_goal[2:].copy()
+            return self.env.observe()
+        self.effector_goal = None
+        for _ in range(100):
+            obj = self.pusher.sample_disc(self.rng)
+            far = [c for c in CORNERS if self.pusher.path_length(obj, c) >= self.min_path]
+            if far:
+                break
+        self.target = far[self.rng.integers(len(far))].copy()
+        eff = self.pusher.sample_effector(self.rng, obj, near=0.6)
+        self.env.set_state(np.concatenate([eff, obj]))
+        return self.env.observe()
+
+    def act(self, obs: dict) -> np.ndarray:
+        s = np.asarray(obs["agent_pos"], dtype=np.float64)
+        eff, obj = s[:2], s[2:]
+        err = float(np.linalg.norm(obj - self.target))
+        # hysteresis: stop pushing within tol, push again if the disc drifted past 1.5 tol
+        self._pushing = err > (self.tol if self._pushing else 1.5 * self.tol)
+        if self._pushing:
+            cmd = self.pusher.push(s, self.target, final=True)
+        elif self.effector_goal is not None:
+            cmd = self.pusher.move_effector(eff, obj, self.effector_goal)
+        else:
+            cmd = eff.copy()
+            self._done = True
+        return _clip(cmd + self.rng.normal(0.0, self.noise, 2))
+
+    @property
+    def done(self) -> bool:
+        return self._done
+
+
+class PlayFullSpace:
+    """Goal-free play: push the disc to random targets (sometimes via a detour), move the effector alone,
+    pause; mild command noise. Never done (episodes end at the recorder's length)."""
+
+    region: int | None = None
+
+    def __init__(self, env, rng: np.random.Generator, noise: float = 0.01, leg_budget: int = 250, **_):
+        self.env, self.rng, self.noise, self.leg_budget = env, rng, float(noise), int(leg_budget)
+        self.pusher = Pusher(self.region)
+        self._queue: list[tuple[str, np.ndarray]] = []
+        self._budget = 0
+        self._lead = MAX_LEAD
+
+    def _choose_region(self) -> None:
+        """Hook for the partitioned variant."""
+
+    def reset(self) -> dict:
+        self._choose_region()
+        obj = self.pusher.sample_disc(self.rng)
+        eff = self.pusher.sample_effector(self.rng, obj, near=0.8)
+        self.env.set_state(np.concatenate([eff, obj]))
+        self._queue = []
+        return self.env.observe()
+
+    def _random_effector_point(self, obj: np.ndarray) -> np.ndarray:
+        for _ in range(100):
+            p = self.pusher.sample_effector(self.rng, obj)
+            if self.region is None or inside_region(p, self.region, -0.25):
+                return p
+        return self.pusher.sample_effector(self.rng, obj, near=0.6)
+
+    def _new_leg(self, s: np.ndarray) -> None:
+        r = self.rng.random()
+        self._budget, self._lead = self.leg_budget, self.rng.uniform(0.06, MAX_LEAD)
+        if r < 0.12:
+            self._queue = [("pause", np.array([self.rng.integers(5, 25), 0.0]))]
+        elif r < 0.3:
+            self._queue = [("effector", self._random_effector_point(s[2:]))]
+        else:
+            target = self.pusher.sample_disc(self.rng)
+            self._queue = [("disc", target)]
+            if self.rng.random() < 0.3:  # detour through another point first
+                self._queue.insert(0, ("disc", self.pusher.sample_disc(self.rng)))
+
+    def act(self, obs: dict) -> np.ndarray:
+        s = np.asarray(obs["agent_pos"], dtype=np.float64)
+        eff, obj = s[:2], s[2:]
+        while True:
+            if not self._queue:
+                self._new_leg(s)
+            kind, target = self._queue[0]
+            self._budget -= 1
+            if kind == "pause":
+                if target[0] <= 0 or self._budget <= 0:
+                    self._queue.pop(0)
+                    continue
+                target[0] -= 1
+                cmd = eff + self.rng.normal(0.0, 0.002, 2)
+                break
+            reached = (np.linalg.norm(obj - target) < 0.08) if kind == "disc" else (np.linalg.norm(eff - target) < 0.04)
+            if reached or self._budget <= 0:
+                self._queue.pop(0)
+                self._budget = self.leg_budget
+                continue
+            if kind == "disc":
+                cmd = self.pusher.push(s, target, final=False, lead=self._lead)
+            else:
+                cmd = self.pusher.move_effector(eff, obj, target)
+            break
+        return _clip(cmd + self.rng.normal(0.0, self.noise, 2))
+
+    @property
+    def done(self) -> bool:
+        return False
+
+
+class PlayPartitioned(PlayFullSpace):
+    """Play confined to one region per episode (``region`` kwarg, else random per reset): disc targets and
+    disc paths stay 0.06 inside the region, effector-only moves stay near it."""
+
+    def __init__(self, env, rng: np.random.Generator, region: int | None = None, **kwargs):
+        self.fixed_region = region
+        self.region = region if region is not None else int(rng.integers(len(REGION_NAMES)))
+        self._pushers = {}
+        super().__init__(env, rng, **kwargs)
+        self._pushers[self.region] = self.pusher
+
+    def _choose_region(self) -> None:
+        if self.fixed_region is None:
+            self.region = int(self.rng.integers(len(REGION_NAMES)))
+        if self.region not in self._pushers:
+            self._pushers[self.region] = Pusher(self.region)
+        self.pusher = self._pushers[self.region]
+
+
+# ------------------------------------------------------------------------------------------ recording
+
+BEHAVIOURS = {
+    # name: (operator class, max frames per episode, dataset task string)
+    "expert": (ExpertReachGoal, 600, "push the disc to a corner of the maze"),
+    "full": (PlayFullSpace, 800, "play: push the disc anywhere in the maze"),
+    "partitioned": (PlayPartitioned, 630, "play: push the disc inside one region of the maze"),
+}
+
+
+def planar_push_features(with_images: bool = False, image_size: int = 96) -> dict:
+    from .env import STATE_NAMES
+
+    feats = {
+        "observation.state": {"dtype": "float32", "shape": (4,), "names": list(STATE_NAMES)},
+        "action": {"dtype": "float32", "shape": (2,), "names": ["cmd_x", "cmd_y"]},
+    }
+    if with_images:
+        feats["observation.images.top"] = {
+            "dtype": "video", "shape": (image_size, image_size, 3), "names": ["height", "width", "channels"]}
+    return feats
+
+
+def disc_coverage(states: np.ndarray) -> float:
+    """Fraction of the maze cells a disc centre can occupy that the disc visited (states (T, 4))."""
+    ok = free_disc_cells()
+    row, col = maze_cell_of(np.asarray(states)[:, 2:4])
+    seen = np.zeros((MAZE_CELLS, MAZE_CELLS), bool)
+    seen[row, col] = True
+    return float((seen & ok).sum() / ok.sum())
+
+
+def run_episode(env, operator, max_frames: int) -> tuple[np.ndarray, np.ndarray, list | None, bool]:
+    """Roll ``operator`` in ``env``: states (T, 4), actions (T, 2), images (or None), whether it ended done.
+
+    When the operator finishes, the final state is kept as a last frame (holding the command) so the
+    demonstrated goal appears in the data."""
+    obs = operator.reset()
+    states, actions, images = [], [], [] if "pixels" in obs else None
+    for _ in range(max_frames):
+        a = operator.act(obs)
+        states.append(obs["agent_pos"])
+        actions.append(a)
+        if images is not None:
+            images.append(obs["pixels"]["top"])
+        obs, *_ = env.step(a)
+        if operator.done:
+            break
+    finished = bool(operator.done)
+    if finished and len(states) < max_frames:
+        states.append(obs["agent_pos"])
+        actions.append(actions[-1])
+        if images is not None:
+            images.append(obs["pixels"]["top"])
+    return np.asarray(states, np.float32), np.asarray(actions, np.float32), images, finished
+
+
+def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int = 0, with_images: bool = False,
+                               repo_id: str | None = None, image_size: int = 96, max_episode_frames: int | None = None,
+                               verbose: bool = False):
+    """Record episodes of ``behaviour`` (expert | full | partitioned) until about ``num_frames`` frames into a
+    new LeRobot v3 dataset at ``root`` (must not exist). Expert episodes that do not reach their corner are
+    dropped. Returns the dataset reopened read-only."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from lerobot.utils.utils import SuppressProgressBars
+
+    from .env import FPS, PlanarPushEnv
+
+    if behaviour not in BEHAVIOURS:
+        raise ValueError(f"Unknown behaviour {behaviour!r}; valid: {sorted(BEHAVIOURS)}")
+    if Path(root).exists():
+        raise FileExistsError(f"Dataset root {root} already exists; pick a new root or delete it")
+    cls, max_len, task = BEHAVIOURS[behaviour]
+    max_len = int(max_episode_frames or max_len)
+    repo_id = repo_id or f"local/planar_push_{behaviour}"
+    rng = np.random.default_rng(seed)
+    env = PlanarPushEnv(task="pair0", obs_type="pixels_state" if with_images else "state", image_size=image_size,
+                        terminate_on_success=False)
+    env.reset(seed=seed)
+    operator = cls(env, rng)
+    ds = LeRobotDataset.create(repo_id, fps=FPS, features=planar_push_features(with_images, image_size), root=root,
+                               use_videos=with_images)
+    total, dropped, t0 = 0, 0, time.perf_counter()
+    try:
+        while total < num_frames:
+            states, actions, images, finished = run_episode(env, operator, max_len)
+            if behaviour == "expert" and not finished:
+                dropped += 1
+                continue
+            for t in range(len(states)):
+                frame = {"observation.state": states[t], "action": actions[t], "task": task}
+                if images is not None:
+                    frame["observation.images.top"] = images[t]
+                ds.add_frame(frame)
+            with SuppressProgressBars():
+                ds.save_episode()
+            total += len(states)
+            if verbose:
+                print(f"{behaviour}: {total}/{num_frames} frames, {ds.num_episodes} episodes, {dropped} dropped, "
+                      f"{total / (time.perf_counter() - t0):.0f} frames/s", flush=True)
+    finally:
+        if ds.has_pending_frames():
+            ds.clear_episode_buffer()
+        ds.finalize()
+        env.close()
+    return LeRobotDataset(repo_id, root=root)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description="Record scripted planar push demonstrations (LeRobot v3 dataset).")
+    ap.add_argument("--behaviour", required=True, choices=sorted(BEHAVIOURS))
+    ap.add_argument("--root", required=True, help="output directory (must not exist)")
+    ap.add_argument("--frames", type=int, required=True, help="record episodes until about this many frames")
+    ap.add_argument("--repo-id", default=None)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--images", action="store_true", help="also record observation.images.top (video)")
+    ap.add_argument("--image-size", type=int, default=96)
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    ds = record_planar_push_dataset(args.behaviour, args.root, args.frames, args.seed, args.images, args.repo_id,
+                                    args.image_size, verbose=True)
+    states = np.stack([np.asarray(x) for x in ds.hf_dataset["observation.state"]])
+    print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in "
+          f"{time.perf_counter() - t0:.0f} s; disc coverage {disc_coverage(states):.2f} of the maze cells")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,170 @@
+"""Planar push: MuJoCo physics, success rule, eval pairs solved by the expert, demonstrators, datasets, LeRobot factory."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.envs.configs import EnvConfig
+from lerobot.envs.factory import make_env
+from lerobot.envs.utils import preprocess_observation
+from lerobot_efm.envs import PlanarPushEnv, PlanarPushEnvConfig
+from lerobot_efm.envs.planar_push.demonstrators import (
+    BEHAVIOURS, ExpertReachGoal, PlayFullSpace, PlayPartitioned, disc_coverage, record_planar_push_dataset, run_episode,
+)
+from lerobot_efm.envs.planar_push.env import EVAL_PAIRS, GYM_ID, SUCCESS_TOL, TASK_NAMES
+from lerobot_efm.envs.planar_push.maze import CELL, region_of, wall_distance
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = PlanarPushEnv(task="all")
+    yield e
+    e.close()
+
+
+def _run(env, cmd, n):
+    for _ in range(n):
+        obs, *_ = env.step(np.asarray(cmd, np.float32))
+    return obs["agent_pos"].astype(float)
+
+
+def test_effector_tracks_command(env):
+    env.reset(options={"initial": [0.3, -0.5, -0.5, 0.5]})
+    s = _run(env, [0.6, -0.5], 30)
+    np.testing.assert_allclose(s[:2], [0.6, -0.5], atol=0.01)
+    np.testing.assert_allclose(s[2:], [-0.5, 0.5], atol=1e-6)  # disc untouched: friction holds it
+
+
+def test_effector_pushes_disc(env):
+    env.reset(options={"initial": [-0.8, -0.55, -0.45, -0.55]})
+    s = _run(env, [0.3, -0.55], 40)
+    assert s[2] > 0.4 and abs(s[3] + 0.55) < 0.02  # pushed right along its line
+    assert s[2] - s[0] == pytest.approx(0.275, abs=0.02)  # in contact, behind it
+
+
+def test_walls_block_effector_and_disc(env):
+    env.reset(options={"initial": [0.5, -0.5, -0.6, 0.5]})
+    s = _run(env, [0.5, 0.5], 40)  # effector into the divider from below
+    assert s[1] < -CELL / 2 - 0.06
+    env.reset(options={"initial": [0.5, -0.7, 0.5, -0.4]})
+    s = _run(env, [0.5, 0.5], 60)  # disc pushed up into the divider
+    assert wall_distance(s[2:]) > 0.19 and s[3] < -CELL / 2 - 0.18
+    env.reset(options={"initial": [0.6, 0.5, 0.0, 0.5]})
+    s = _run(env, [1.0, 0.5], 40)  # arena border
+    assert s[0] <= 1.0 - 0.075 + 0.005
+
+
+def test_success_rule_and_termination():
+    env = gym.make(GYM_ID, task="pair0", max_episode_steps=5)
+    _, info = env.reset()
+    assert not info["is_success"]
+    goal = EVAL_PAIRS[0][2]
+    near = goal + np.array([0.0, 0.0, 0.0, -SUCCESS_TOL * 0.5])
+    _, info = env.reset(options={"initial": near})
+    assert info["is_success"]
+    _, reward, terminated, truncated, info = env.step(near[:2])
+    assert info["is_success"] and terminated and reward == 1.0 and not truncated
+    _, info = env.reset(options={"initial": goal + np.array([0.0, 0.0, 0.0, -SUCCESS_TOL * 1.5])})
+    assert not info["is_success"]  # disc too far although the effector is on its goal
+    _, info = env.reset(options={"initial": goal + np.array([0.0, SUCCESS_TOL * 1.5, 0.0, 0.0])})
+    assert not info["is_success"]  # and the other way round
+    env.close()
+
+
+def test_invalid_inputs_raise(env):
+    env.reset(options={"pair": 0})
+    with pytest.raises(ValueError, match="action"):
+        env.step(np.array([np.nan, 0.0]))
+    with pytest.raises(ValueError, match="overlaps a wall"):
+        env.reset(options={"initial": [0.5, 0.0, -0.5, 0.5]})
+    with pytest.raises(ValueError, match="overlaps the disc"):
+        env.reset(options={"initial": [0.0, 0.5, 0.1, 0.5]})
+    with pytest.raises(ValueError, match="pair9"):
+        PlanarPushEnvConfig(task="pair10")
+
+
+def test_all_cycles_the_ten_pairs(env):
+    assert len(EVAL_PAIRS) == 10 and TASK_NAMES[-1] == "pair9"
+    env._reset_count = 0
+    seen = [env.reset()[0]["goal.state"].copy() for _ in range(10)]
+    for k, g in enumerate(seen):
+        np.testing.assert_allclose(g, EVAL_PAIRS[k][2], atol=1e-6)
+    for name, start, goal in EVAL_PAIRS:  # far apart
+        assert np.linalg.norm(start[2:] - goal[2:]) > 0.9, name
+
+
+@pytest.mark.parametrize("pair", [0, 3, 9])
+def test_expert_solves_eval_pairs(env, pair):
+    obs, _ = env.reset(options={"pair": pair})
+    expert = ExpertReachGoal(env, np.random.default_rng(pair), goal=env.goal)
+    obs = expert.reset()
+    for _ in range(600):
+        obs, _, terminated, _, info = env.step(expert.act(obs))
+        if terminated:
+            break
+    assert info["is_success"], (pair, info)
+
+
+@pytest.mark.parametrize("behaviour", sorted(BEHAVIOURS))
+def test_demonstrators_valid_actions(env, behaviour):
+    cls, _, _ = BEHAVIOURS[behaviour]
+    op = cls(env, np.random.default_rng(0))
+    states, actions, images, _ = run_episode(env, op, 300)
+    assert actions.shape[1] == 2 and actions.dtype == np.float32 and images is None
+    assert np.all(np.isfinite(actions)) and np.all(np.abs(actions) <= 1.0)
+    assert np.linalg.norm(states[-1, 2:] - states[0, 2:]) > 0.1 or behaviour == "expert"  # play moves the disc
+    assert disc_coverage(states) > 0.0
+
+
+def test_expert_reaches_its_corner(env):
+    op = ExpertReachGoal(env, np.random.default_rng(3))
+    _, _, _, done = run_episode(env, op, 600)
+    assert done and np.linalg.norm(env.state[2:] - op.target) < 0.04
+
+
+@pytest.mark.parametrize("region", [0, 1, 2])
+def test_partitioned_stays_in_region(env, region):
+    op = PlayPartitioned(env, np.random.default_rng(region), region=region)
+    states, _, _, _ = run_episode(env, op, 400)
+    assert np.all(region_of(states[:, 2:]) == region)
+
+
+def test_full_play_leaves_its_start_region(env):
+    op = PlayFullSpace(env, np.random.default_rng(0))
+    states, _, _, _ = run_episode(env, op, 800)
+    assert len(set(region_of(states[:, 2:]).tolist())) >= 2
+
+
+def test_recorded_dataset_loads(tmp_path):
+    ds = record_planar_push_dataset("full", tmp_path / "pp", num_frames=120, seed=0, max_episode_frames=60)
+    again = LeRobotDataset("local/planar_push_full", root=tmp_path / "pp")
+    assert again.num_frames == ds.num_frames == 120 and again.num_episodes == 2
+    assert again.features["observation.state"]["shape"] == (4,)
+    assert again.features["observation.state"]["names"] == ["eff_x", "eff_y", "obj_x", "obj_y"]
+    assert again.features["action"]["shape"] == (2,) and "observation.images.top" not in again.features
+    item = again[5]
+    assert item["observation.state"].shape == (4,) and item["action"].shape == (2,)
+    with pytest.raises(ValueError, match="behaviour"):
+        record_planar_push_dataset("nope", tmp_path / "x", 10)
+
+
+def test_lerobot_make_env_and_images():
+    cfg = PlanarPushEnvConfig(task="pair0")
+    assert EnvConfig.get_choice_class("planar_push") is PlanarPushEnvConfig
+    vec = make_env(cfg, n_envs=1)[cfg.type][0]
+    try:
+        obs, _ = vec.reset(seed=[0])
+        obs, _, _, _, info = vec.step(obs["agent_pos"][:, :2])
+        batch = preprocess_observation(obs)
+        assert batch["observation.state"].shape == (1, 4) and batch["observation.goal.state"].shape == (1, 4)
+        assert "is_success" in info and vec.call("_max_episode_steps") == (600,)
+    finally:
+        vec.close()
+    env = PlanarPushEnv(task="pair1", obs_type="pixels_state", image_size=32)
+    obs, _ = env.reset()
+    assert obs["pixels"]["top"].shape == (32, 32, 3) and obs["goal.images.top"].shape == (32, 32, 3)
+    np.testing.assert_array_equal(env.render_state(env.goal), obs["goal.images.top"])
+    assert not np.array_equal(obs["pixels"]["top"], obs["goal.images.top"])
+    assert env.render().shape == (256, 256, 3)
+    env.close()
