@@ -136,6 +136,9 @@ class TalosKitchenEnv(gym.Env):
         self._goal_env = np.zeros(ENV_STATE_DIM, np.float32)
         self._goal_snapshot: tuple | None = None
         self._initial_snapshot: tuple | None = None
+        # dataset names of the recorded vectors (lerobot-efm-record)
+        self.feature_names = {"observation.state": list(STATE_NAMES), "observation.environment_state": list(ENV_STATE_NAMES),
+                              "action": list(STATE_NAMES[10:])}
 
     # ------------------------------------------------------------------------------ task / state
     def _set_current(self, name: str) -> None:
@@ -283,13 +286,24 @@ class TalosKitchenEnv(gym.Env):
     def step(self, action):
         if self._goal_snapshot is None:
             raise RuntimeError("call reset() before step()")
+        self.advance(action)
+        info = self._info()
+        success = info["is_success"]
+        return self._obs(), float(success), bool(success and self.terminate_on_success), False, info
+
+    def observe(self) -> dict:
+        """The current observation (same format as :meth:`reset` / :meth:`step`), e.g. after :meth:`set_state`."""
+        return self._obs()
+
+    def advance(self, action) -> None:
+        """Apply one action with exactly :meth:`step`'s physics but no rendering / observation / success.
+
+        For fast scripted rollouts and statistics (rendering dominates :meth:`step`'s cost).
+        """
         cmd = self._control.validate_command(action)  # ValueError naming NaN/inf entries
         self.controller.step(self.data, cmd)
         self._mujoco().mj_forward(self.model, self.data)  # mj_step leaves kinematics one substep stale
         self._cmd = self._tracked(cmd)
-        info = self._info()
-        success = info["is_success"]
-        return self._obs(), float(success), bool(success and self.terminate_on_success), False, info
 
     def render(self) -> np.ndarray:
         return self._render_renderer.render(self.data)

@@ -1,0 +1,90 @@
+"""The scripted play operator: valid deterministic commands, and play that really moves door, tray and pot."""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+pytest.importorskip("mujoco")
+
+from lerobot_efm.envs.talos_kitchen import play, tasks  # noqa: E402
+from lerobot_efm.envs.talos_kitchen.env import TalosKitchenEnv  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = TalosKitchenEnv(image_size=32, randomize=False, terminate_on_success=False)
+    e.reset(seed=0)
+    yield e
+    e.close()
+
+
+def _record(env, seed, steps):
+    """Recorder loop of the operator protocol through the real ``env.step``; returns (actions, env states)."""
+    env.reset(seed=0)
+    op = play.TalosPlayOperator(env, np.random.default_rng(seed))
+    obs = op.reset()
+    actions, states = [], [obs["environment_state"]]
+    for _ in range(steps):
+        a = op.act(obs)
+        obs, *_ = env.step(a)
+        actions.append(a)
+        states.append(obs["environment_state"])
+    assert op.done is False
+    return np.array(actions), np.array(states)
+
+
+def test_commands_valid_and_deterministic(env):
+    a1, s1 = _record(env, seed=3, steps=120)
+    a2, s2 = _record(env, seed=3, steps=120)
+    a3, _ = _record(env, seed=4, steps=120)
+    assert a1.shape == (120, 10) and a1.dtype == np.float32
+    assert np.isfinite(a1).all()
+    assert all(env.action_space.contains(a) for a in a1)
+    np.testing.assert_array_equal(a1, a2)
+    np.testing.assert_array_equal(s1, s2)
+    assert not np.array_equal(a1, a3)
+
+
+def test_reset_states_are_feasible(env):
+    op = play.TalosPlayOperator(env, np.random.default_rng(0))
+    for _ in range(12):
+        obs = op.reset()
+        door, tray = obs["environment_state"][:2]
+        assert set(obs) == set(env.observation_space.spaces)
+        assert play.pot_location(obs["environment_state"]) in ("table", "tray")
+        assert not (door < -tasks.DOOR_TOL and tray < -0.02), "door open with the tray out is never a start"
+
+
+def test_coverage_counts_task_states():
+    closed = play.state_env_vec(tasks.TASKS["open_door"].initial)
+    on_tray = play.state_env_vec(tasks.TASKS["pot_to_tray"].goal)
+    quat = np.array([1.0, 0, 0, 0])
+    e = np.array([np.r_[closed, quat], np.r_[on_tray, quat], np.r_[closed, quat], np.r_[closed + [0.5, 0, 0, 0, 0], quat]])
+    cov = play.coverage(e)
+    assert cov["state/door_closed/tray_in/pot_home"] == {"frames": 2, "visits": 2}
+    assert cov["state/door_closed/tray_out/pot_tray"] == {"frames": 1, "visits": 1}
+    assert cov["pot_on_tray"]["frames"] == 1 and cov["door_open"]["frames"] == 0
+    assert len(play.TASK_STATES) == 5
+
+
+def test_play_moves_door_tray_and_pot(env):
+    """A few thousand steps (fast physics-only ``env.advance``) change every object, in both directions."""
+    env.reset(seed=0)
+    op = play.TalosPlayOperator(env, np.random.default_rng(1))
+    states = []
+    for _ in range(2):  # two episodes of 3000 steps
+        states.append(op.reset()["environment_state"])
+        for _ in range(3000):
+            env.advance(op.act(None))
+            states.append(op.read_state()[3])
+    s = np.array(states, dtype=float)
+    assert s[:, 0].min() < -0.9 and s[:, 1].min() < -0.2
+    assert np.linalg.norm(s[:, 2:5] - s[0, 2:5], axis=1).max() > 0.1
+    cov = play.coverage(s)
+    for name in ("door_open", "door_closed", "tray_out", "tray_in", "pot_home", "pot_moved", "pot_on_tray"):
+        assert cov[name]["visits"] >= 1, (name, cov)
+    assert sum(v["attempted"] for v in op.stats.values()) >= 15, op.stats
+    assert sum(v["succeeded"] for k, v in op.stats.items() if k not in ("home", "wander")) >= 8, op.stats
