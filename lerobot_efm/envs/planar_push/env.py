@@ -270,8 +270,9 @@ class PlanarPushEnv(gym.Env):
             if not 0 <= k < len(EVAL_PAIRS):
                 raise ValueError(f"options['pair'] must be in 0..{len(EVAL_PAIRS) - 1}, got {options['pair']!r}")
             name = TASK_NAMES[k]
-        elif self.suite == ALL:
-            name = TASK_NAMES[self._reset_count % len(TASK_NAMES)]
+        elif self.suite == ALL:  # a seeded reset picks pair seed % 10: lerobot-eval's batched envs then cover all pairs
+            k = seed if seed is not None else self._reset_count
+            name = TASK_NAMES[k % len(TASK_NAMES)]
         else:
             name = self.suite
         self._reset_count += 1

@@ -1,0 +1,558 @@
+#!/usr/bin/env python
+"""The paper's agent comparison (Fig. 5 OGBench table, Fig. 7 planar push table), run with LeRobot's own CLIs.
+
+For every (variant, dataset) cell: ``lerobot-train --config_path=train_configs/<suite>.json
+--policy.type=efm_xx --policy.use_rl=...`` (one fixed hyper-parameter set per suite, as in the paper), then
+``lerobot-eval`` on the suite's evaluation tasks, then a markdown table of our success rate next to the paper's
+(rows = the nine agent variants, columns = datasets) and a JSON file with every command, budget and wall time.
+
+Suites:
+
+* ``ogbench``: locally generated OGBench ``pointmaze-large-{navigate,stitch}-v0`` (official sizes, see
+  ``datasets_cards/ogbench_pointmaze.md``), evaluated on OGBench's task1..task5 (``--env.task=all``: seeded
+  resets cycle the five tasks, so ``--eval-episodes`` must be a multiple of 5).
+* ``planar_push``: scripted ``expert`` / ``full`` / ``partitioned`` play recorded to the paper's dataset sizes,
+  evaluated on the 10 fixed (start, goal) pairs (``--env.task=all``; a multiple of 10 episodes).
+
+Budgets: the full paper budget is 200k steps at batch 128 (``--device cuda``, the configs' values). On CPU the
+default is ``CPU_STEPS`` steps at batch ``CPU_BATCH`` (stated in the report); the EMA cutoff then shrinks to
+``steps / 10`` when that is shorter than the paper's (an EMA with a 5000-update cutoff barely moves in 2000
+updates), and LeRobot's cosine schedule scales its warm-up/decay to the budget by itself.
+
+Resumable: a cell whose ``result.json`` exists under ``--work-dir`` is not re-run; a finished training whose
+evaluation is missing is only re-evaluated. Datasets are generated once under ``--data-root``.
+
+    python benchmarks/paper_experiments.py --suite planar_push --variants all --device cpu
+    python benchmarks/paper_experiments.py --suite ogbench --device cuda --steps 200000 --eval-episodes 100 --jobs 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+RESULT_FILE = "result.json"
+CHECKPOINT = Path("checkpoints") / "last" / "pretrained_model"
+FULL_STEPS, FULL_BATCH = 200_000, 128
+CPU_STEPS, CPU_BATCH = 2_000, 64
+EVAL_SEED = 1000  # lerobot-eval's default seed, passed explicitly: episode i runs seed EVAL_SEED + i
+
+# variant name -> (policy type, use_rl, paper label)
+VARIANTS: dict[str, tuple[str, bool, str]] = {
+    "gc": ("efm_gc", False, "FM-GC"),
+    "ac": ("efm_ac", False, "FM-AC no-RL"),
+    "pc": ("efm_pc", False, "FM-PC no-RL"),
+    "ps": ("efm_ps", False, "FM-PS no-RL"),
+    "as": ("efm_as", False, "FM-AS no-RL"),
+    "ac_rl": ("efm_ac", True, "FM-AC use-RL"),
+    "pc_rl": ("efm_pc", True, "FM-PC use-RL"),
+    "ps_rl": ("efm_ps", True, "FM-PS use-RL"),
+    "as_rl": ("efm_as", True, "FM-AS use-RL"),
+}
+
+
+@dataclass(frozen=True)
+class Suite:
+    name: str
+    config: str  # train config under train_configs/
+    env_args: tuple[str, ...]  # lerobot-eval env selection (dataset-independent part)
+    datasets: tuple[str, ...]
+    dataset_columns: dict[str, str]  # dataset -> column title
+    num_tasks: int  # eval tasks cycled by seeded resets; eval episodes must be a multiple
+    task_prefix: str
+    first_task: int  # number of the task a seed divisible by num_tasks runs (task1 / pair0)
+    paper: dict[str, dict[str, str]]  # variant -> dataset -> the paper's number (as printed)
+    paper_source: str
+    full_eval_episodes: int
+    cpu_eval_episodes: int
+    episodes_note: str
+
+
+# Fig. 5 (OGBench success %, single run per cell in the paper); only the datasets we can generate offline.
+OGBENCH_PAPER = {
+    "pointmaze-large-navigate-v0": dict(gc=66, ac=60, pc=60, ps=31, **{"as": 29}, ac_rl=89, pc_rl=89, ps_rl=67, as_rl=64),
+    "pointmaze-large-stitch-v0": dict(gc=39, ac=37, pc=23, ps=15, **{"as": 14}, ac_rl=40, pc_rl=40, ps_rl=42, as_rl=44),
+}
+# Fig. 7 (planar push final success %, mean ± std over 4 runs x 8 seeds): Expert / Full / Partitioned.
+PLANAR_PAPER_ROWS = {
+    "gc": ("96±5", "65±4", "47±5"),
+    "ac": ("96±4", "97±2", "52±7"),
+    "pc": ("99±2", "91±3", "62±5"),
+    "ps": ("92±4", "73±6", "47±4"),
+    "as": ("34±8", "82±6", "49±5"),
+    "ac_rl": ("32±8", "89±3", "78±4"),
+    "pc_rl": ("68±21", "89±4", "90±3"),
+    "ps_rl": ("60±35", "67±9", "67±10"),
+    "as_rl": ("42±18", "77±7", "68±5"),
+}
+PLANAR_DATASETS = ("expert", "full", "partitioned")
+# Paper dataset sizes (frames of mouse teleoperation at 20 Hz): reach_goal / play_full / play_stitch.
+PLANAR_FRAMES = {"expert": 46_793, "full": 36_661, "partitioned": 29_087}
+OGBENCH_DATASETS = tuple(OGBENCH_PAPER)
+
+SUITES: dict[str, Suite] = {
+    "ogbench": Suite(
+        name="ogbench",
+        config="ogbench_pointmaze_efm.json",
+        env_args=("--env.type=ogbench", "--env.task=all"),
+        datasets=OGBENCH_DATASETS,
+        dataset_columns={"pointmaze-large-navigate-v0": "pointmaze-large-navigate", "pointmaze-large-stitch-v0": "pointmaze-large-stitch"},
+        num_tasks=5,
+        task_prefix="task",
+        first_task=1,
+        paper={v: {d: str(OGBENCH_PAPER[d][v]) for d in OGBENCH_DATASETS} for v in VARIANTS},
+        paper_source="paper Fig. 5 (OGBench, 5 tasks x 20 episodes, 200k steps)",
+        full_eval_episodes=100,
+        cpu_eval_episodes=10,
+        episodes_note="OGBench task1..task5, seeded resets cycle them (task = seed % 5 + 1)",
+    ),
+    "planar_push": Suite(
+        name="planar_push",
+        config="planar_push_efm.json",
+        env_args=("--env.type=planar_push", "--env.task=all"),
+        datasets=PLANAR_DATASETS,
+        dataset_columns={"expert": "Expert", "full": "Full", "partitioned": "Partitioned"},
+        num_tasks=10,
+        task_prefix="pair",
+        first_task=0,
+        paper={v: dict(zip(PLANAR_DATASETS, row, strict=True)) for v, row in PLANAR_PAPER_ROWS.items()},
+        paper_source="paper Fig. 7 (planar push final success, mean±std of 4 runs x 8 seeds, 200k steps)",
+        full_eval_episodes=60,
+        cpu_eval_episodes=10,
+        episodes_note="the 10 fixed (start, goal) pairs of `--env.task=all`",
+    ),
+}
+
+
+# ------------------------------------------------------------------------------------------- helpers
+
+def parse_list(values: list[str] | None, valid: tuple[str, ...] | list[str], what: str) -> list[str]:
+    """``all`` or names (space- or comma-separated) -> list in ``valid``'s order; unknown names raise."""
+    names = [n for v in (values or ["all"]) for n in v.replace(",", " ").split()]
+    if not names or names == ["all"]:
+        return list(valid)
+    bad = [n for n in names if n not in valid]
+    if bad:
+        raise ValueError(f"Unknown {what} {bad}; valid: {list(valid)} or 'all'")
+    return [v for v in valid if v in names]
+
+
+def run_logged(cmd: list[str], log: Path, cwd: Path = REPO_ROOT) -> float:
+    """Run ``cmd`` with its output in ``log``; returns the wall time. Raises with the log tail on failure."""
+    env = {**os.environ, "HF_HUB_OFFLINE": os.environ.get("HF_HUB_OFFLINE", "1"),
+           "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    log.parent.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    with log.open("w") as out:
+        proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env, cwd=cwd)
+    wall = time.perf_counter() - start
+    if proc.returncode:
+        raise RuntimeError(f"{Path(cmd[0]).name} failed (exit {proc.returncode}); log {log}:\n{log.read_text()[-2500:]}")
+    return wall
+
+
+def shell(cmd: list[str]) -> str:
+    """A command as one would type it (paths relative to the repo root where possible)."""
+    def rel(a: str) -> str:
+        for prefix in (str(BIN) + os.sep, str(REPO_ROOT) + os.sep):
+            a = a.replace(prefix, "")
+        return a
+    return " ".join(shlex.quote(rel(a)) for a in cmd)
+
+
+# ------------------------------------------------------------------------------------------- datasets
+
+@dataclass
+class DataSpec:
+    """How big a generated dataset is; ``None`` = the paper's / OGBench's official size."""
+
+    ogbench_episodes: int | None = None
+    ogbench_episode_steps: int | None = None
+    planar_frames: int | None = None
+
+    def tag(self, suite: str) -> str:
+        if suite == "ogbench" and (self.ogbench_episodes or self.ogbench_episode_steps):
+            return f"-e{self.ogbench_episodes or 'full'}x{self.ogbench_episode_steps or 'full'}"
+        if suite == "planar_push" and self.planar_frames:
+            return f"-f{self.planar_frames}"
+        return ""
+
+
+def dataset_repo_id(suite: str, dataset: str) -> str:
+    return f"local/{dataset}" if suite == "ogbench" else f"local/planar_push_{dataset}"
+
+
+def dataset_root(data_root: Path, suite: str, dataset: str, spec: DataSpec) -> Path:
+    return data_root / suite / f"{dataset}{spec.tag(suite)}"
+
+
+def generate_command(suite: str, dataset: str, root: Path, spec: DataSpec) -> list[str]:
+    py = [sys.executable, "-m"]
+    if suite == "ogbench":
+        cmd = [*py, "lerobot_efm.ogbench.generate", "--dataset", dataset, "--root", str(root),
+               "--repo-id", dataset_repo_id(suite, dataset)]
+        if spec.ogbench_episodes:
+            cmd += ["--episodes", str(spec.ogbench_episodes)]
+        if spec.ogbench_episode_steps:
+            cmd += ["--episode-steps", str(spec.ogbench_episode_steps)]
+        return cmd
+    frames = spec.planar_frames or PLANAR_FRAMES[dataset]
+    return [*py, "lerobot_efm.envs.planar_push.demonstrators", "--behaviour", dataset, "--root", str(root),
+            "--frames", str(frames), "--repo-id", dataset_repo_id(suite, dataset)]
+
+
+def ensure_dataset(suite: str, dataset: str, data_root: Path, spec: DataSpec) -> tuple[Path, str | None, float]:
+    """Generate the dataset unless ``meta/info.json`` exists; returns (root, command or None, seconds)."""
+    root = dataset_root(data_root, suite, dataset, spec)
+    if (root / "meta" / "info.json").exists():
+        return root, None, 0.0
+    shutil.rmtree(root, ignore_errors=True)  # a half-written dataset from an interrupted run
+    shutil.rmtree(Path(f"{root}-npz"), ignore_errors=True)
+    cmd = generate_command(suite, dataset, root, spec)
+    print(f"generating {suite}/{dataset}: {shell(cmd)}", flush=True)
+    wall = run_logged(cmd, data_root / suite / f"{root.name}.log")
+    return root, shell(cmd), wall
+
+
+# ------------------------------------------------------------------------------------------- one cell
+
+@dataclass
+class Budget:
+    device: str
+    steps: int
+    batch_size: int
+    eval_episodes: int
+    eval_batch_size: int
+    eval_async: bool  # AsyncVectorEnv: one process per env, each importing MuJoCo (minutes on a busy 2-core CPU)
+    ema_cutoff: float | None  # None: the config's (paper) value
+    num_workers: int | None
+    train_args: list[str] = field(default_factory=list)  # extra lerobot-train arguments (e.g. tiny networks)
+    eval_args: list[str] = field(default_factory=list)  # extra lerobot-eval arguments
+
+
+def train_command(suite: Suite, variant: str, data: Path, repo_id: str, out: Path, budget: Budget) -> list[str]:
+    policy_type, use_rl, _ = VARIANTS[variant]
+    cmd = [str(BIN / "lerobot-train"), f"--config_path={REPO_ROOT / 'train_configs' / suite.config}",
+           f"--policy.type={policy_type}", f"--policy.use_rl={str(use_rl).lower()}",
+           f"--dataset.repo_id={repo_id}", f"--dataset.root={data}", f"--output_dir={out}",
+           f"--policy.device={budget.device}", f"--steps={budget.steps}", f"--save_freq={budget.steps}",
+           f"--batch_size={budget.batch_size}", f"--log_freq={max(1, min(1000, budget.steps // 20))}"]
+    if budget.ema_cutoff is not None:
+        cmd.append(f"--policy.ema_cutoff={budget.ema_cutoff:g}")
+    if budget.num_workers is not None:
+        cmd.append(f"--num_workers={budget.num_workers}")
+    return cmd + list(budget.train_args)
+
+
+def eval_command(suite: Suite, dataset: str, checkpoint: Path, out: Path, budget: Budget) -> list[str]:
+    env = list(suite.env_args) + ([f"--env.dataset={dataset}"] if suite.name == "ogbench" else [])
+    return [str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", *env,
+            f"--eval.n_episodes={budget.eval_episodes}", f"--eval.batch_size={budget.eval_batch_size}",
+            f"--eval.use_async_envs={str(budget.eval_async).lower()}",
+            f"--policy.device={budget.device}", f"--seed={EVAL_SEED}", f"--output_dir={out}", *budget.eval_args]
+
+
+def parse_eval_info(info: dict, num_tasks: int, task_prefix: str, first_task: int, seed: int = EVAL_SEED,
+                    tasks_follow_seed: bool = True) -> dict:
+    """``eval_info.json`` -> success % overall and per evaluation task.
+
+    With ``--env.task=all`` lerobot-eval reports one task holding per-episode ``successes``; episode i ran
+    seed ``seed + i``, and our envs pick task ``first_task + seed % num_tasks`` for a seeded reset, which gives the
+    per-task split (left out when ``tasks_follow_seed`` is false)."""
+    try:
+        overall = info["overall"]
+        pc, n = float(overall["pc_success"]), int(overall["n_episodes"])
+        successes = [bool(s) for task in info["per_task"] for s in task["metrics"]["successes"]]
+    except (KeyError, TypeError) as err:
+        raise ValueError(f"eval_info.json lacks {err}; expected overall.pc_success, overall.n_episodes and "
+                         f"per_task[i].metrics.successes") from err
+    if len(successes) != n:
+        raise ValueError(f"eval_info.json: overall.n_episodes={n} but per_task holds {len(successes)} successes")
+    out = {"pc_success": pc, "n_episodes": n, "n_success": int(sum(successes)), "per_task": None}
+    if tasks_follow_seed and n:
+        per: dict[str, list[bool]] = {}
+        for i, ok in enumerate(successes):
+            per.setdefault(f"{task_prefix}{first_task + (seed + i) % num_tasks}", []).append(ok)
+        out["per_task"] = {k: {"pc_success": 100.0 * sum(v) / len(v), "n_episodes": len(v)} for k, v in sorted(per.items())}
+    return out
+
+
+def planar_tasks_follow_seed() -> bool:
+    """Whether a seeded ``planar_push`` reset with ``task=all`` picks pair ``seed % 10`` (then batched evaluation
+    runs every pair equally often). If the env instead cycles pairs per env instance, each env of a batch starts
+    at pair0, so the runner evaluates with batch size 1 to keep the 10-pair cycle exact."""
+    from lerobot_efm.envs.planar_push import PlanarPushEnv
+
+    env = PlanarPushEnv(task="all")
+    try:
+        picked = [env.reset(seed=s)[1]["task"] for s in (13, 13, 7)]
+    finally:
+        env.close()
+    return picked == ["pair3", "pair3", "pair7"]
+
+
+def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Path, budget: Budget,
+             tasks_follow_seed: bool) -> dict:
+    """Train (unless a finished checkpoint exists) and evaluate one cell; writes ``cell_dir/result.json``."""
+    result_path = cell_dir / RESULT_FILE
+    if result_path.exists():
+        return {**json.loads(result_path.read_text()), "cached": True}
+    train_dir, eval_dir = cell_dir / "train", cell_dir / "eval"
+    checkpoint = train_dir / CHECKPOINT
+    tcmd = train_command(suite, variant, data, dataset_repo_id(suite.name, dataset), train_dir, budget)
+    train_s = None
+    if not (checkpoint / "model.safetensors").exists():
+        shutil.rmtree(train_dir, ignore_errors=True)  # an interrupted training: lerobot-train refuses to overwrite
+        print(f"[{suite.name}/{dataset}/{variant}] training: {shell(tcmd)}", flush=True)
+        train_s = run_logged(tcmd, cell_dir / "train.log")
+    shutil.rmtree(eval_dir, ignore_errors=True)
+    ecmd = eval_command(suite, dataset, checkpoint, eval_dir, budget)
+    print(f"[{suite.name}/{dataset}/{variant}] evaluating: {shell(ecmd)}", flush=True)
+    eval_s = run_logged(ecmd, cell_dir / "eval.log")
+    metrics = parse_eval_info(json.loads((eval_dir / "eval_info.json").read_text()), suite.num_tasks,
+                              suite.task_prefix, suite.first_task, EVAL_SEED, tasks_follow_seed)
+    result = {
+        "suite": suite.name, "variant": variant, "agent": VARIANTS[variant][2], "policy_type": VARIANTS[variant][0],
+        "use_rl": VARIANTS[variant][1], "dataset": dataset, **metrics,
+        "paper": suite.paper[variant][dataset], "steps": budget.steps, "batch_size": budget.batch_size,
+        "device": budget.device, "train_s": train_s, "eval_s": eval_s,
+        "train_command": shell(tcmd), "eval_command": shell(ecmd),
+        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    result_path.write_text(json.dumps(result, indent=2))
+    print(f"[{suite.name}/{dataset}/{variant}] success {metrics['pc_success']:.0f}% "
+          f"(paper {result['paper']})", flush=True)
+    return result
+
+
+# ------------------------------------------------------------------------------------------- report
+
+def fmt_pct(value: float | None) -> str:
+    return "–" if value is None else f"{value:.0f}"
+
+
+def results_table(suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]) -> str:
+    """Rows = variants, one column per dataset: ``ours (paper)`` success %."""
+    head = "| agent | " + " | ".join(f"{suite.dataset_columns[d]}: ours | paper" for d in datasets) + " |"
+    sep = "|---|" + "---:|---:|" * len(datasets)
+    rows = [head, sep]
+    for v in variants:
+        parts = []
+        for d in datasets:
+            cell = cells.get((v, d))
+            ours = "failed" if cell and cell.get("error") else fmt_pct(cell.get("pc_success") if cell else None)
+            parts.append(f"{ours} | {suite.paper[v][d]}")
+        rows.append(f"| {VARIANTS[v][2]} | " + " | ".join(parts) + " |")
+    return "\n".join(rows)
+
+
+def per_task_table(suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]) -> str:
+    lines = []
+    for d in datasets:
+        tasks = sorted({t for v in variants for t in ((cells.get((v, d)) or {}).get("per_task") or {})},
+                       key=lambda t: int(t[len(suite.task_prefix):]))
+        if not tasks:
+            continue
+        lines += [f"**{suite.dataset_columns[d]}**", "", "| agent | " + " | ".join(tasks) + " |",
+                  "|---|" + "---:|" * len(tasks)]
+        for v in variants:
+            per = (cells.get((v, d)) or {}).get("per_task") or {}
+            lines.append(f"| {VARIANTS[v][2]} | " + " | ".join(fmt_pct(per.get(t, {}).get("pc_success")) for t in tasks) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def gpu_command(suite: Suite) -> str:
+    return (f".venv/bin/python benchmarks/paper_experiments.py --suite {suite.name} --variants all --datasets all "
+            f"--device cuda --steps {FULL_STEPS} --batch-size {FULL_BATCH} --eval-episodes {suite.full_eval_episodes} "
+            f"--jobs 3 --out benchmarks/results/paper_experiments_{suite.name}_gpu.md")
+
+
+def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[str], cells: dict, budget: Budget,
+                 argv: list[str], datasets_info: dict, wall_s: float, tasks_follow_seed: bool) -> None:
+    full = budget.steps >= FULL_STEPS and budget.batch_size >= FULL_BATCH
+    cfg = json.loads((REPO_ROOT / "train_configs" / suite.config).read_text())
+    ema = budget.ema_cutoff if budget.ema_cutoff is not None else cfg["policy"]["ema_cutoff"]
+    budget_line = (f"**Budget: {budget.steps} training steps at batch {budget.batch_size} on `{budget.device}`** "
+                   f"({'the paper budget' if full else f'the paper trains {FULL_STEPS} steps at batch {FULL_BATCH}'}), "
+                   f"EMA cutoff {ema:g} updates, evaluation {budget.eval_episodes} episodes per cell "
+                   f"(batch {budget.eval_batch_size}) on {suite.episodes_note}, eval seed {EVAL_SEED}.")
+    failed = [f"{d}/{v}" for (v, d), c in cells.items() if c.get("error")]
+    md = [
+        f"# Paper agent comparison: {suite.name}",
+        "",
+        f"Generated {datetime.now(timezone.utc).isoformat(timespec='seconds')} by",
+        "",
+        "```bash",
+        f".venv/bin/python benchmarks/paper_experiments.py {shlex.join(argv)}",
+        "```",
+        "",
+        f"in {wall_s:.0f} s (cached cells not re-run) on {platform.node() or 'this machine'} "
+        f"({os.cpu_count()} CPUs, Python {platform.python_version()}).",
+        "",
+        budget_line,
+        "",
+        f"Hyper-parameters: `train_configs/{suite.config}` (one fixed set for every agent and dataset, as in the "
+        f"paper), with `--policy.type` / `--policy.use_rl` per agent"
+        + (" and the budget overrides above." if not full else "."),
+        "",
+        f"## Success rate (%): ours | {suite.paper_source}",
+        "",
+        results_table(suite, variants, datasets, cells),
+        "",
+    ]
+    if not full:
+        md += ["Our numbers come from a much smaller budget than the paper's and a single seed: they check that the "
+               "pipeline trains and evaluates every agent, not the paper's ranking.", ""]
+    if failed:
+        md += [f"Failed cells (see their `train.log` / `eval.log`): {', '.join(failed)}.", ""]
+    tasks_md = per_task_table(suite, variants, datasets, cells)
+    if tasks_md:
+        md += ["## Success per evaluation task (%)", "", tasks_md]
+    elif suite.name == "planar_push" and not tasks_follow_seed:
+        md += ["Per-pair success is not reported: this `planar_push` env cycles pairs per env instance rather than "
+               "by reset seed, so the evaluation ran with batch size 1 (the 10 pairs in order).", ""]
+    md += ["## Wall time (s): train / eval", "",
+           "| agent | " + " | ".join(suite.dataset_columns[d] for d in datasets) + " |",
+           "|---|" + "---:|" * len(datasets)]
+    for v in variants:
+        md.append(f"| {VARIANTS[v][2]} | " + " | ".join(
+            f"{fmt_pct((cells.get((v, d)) or {}).get('train_s'))} / {fmt_pct((cells.get((v, d)) or {}).get('eval_s'))}"
+            for d in datasets) + " |")
+    md += ["", "## Datasets", ""]
+    for d, info in datasets_info.items():
+        gen = f"`{info['command']}`" if info["command"] else "cached"
+        md.append(f"- `{d}`: `{info['root']}` ({gen})")
+    md += ["", "## Commands", "", "Every cell runs (paths under the work dir):", "", "```bash"]
+    example = next((c for c in cells.values() if c.get("train_command")), None)
+    if example:
+        md += [example["train_command"], example["eval_command"]]
+    md += ["```", "", "The exact command of every cell is in the JSON file next to this report.", "",
+           "Full paper budget on a GPU (all nine agents, every dataset):", "", "```bash", gpu_command(suite), "```", ""]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("\n".join(md))
+    payload = {
+        "suite": suite.name, "argv": argv, "budget": asdict(budget), "wall_s": wall_s,
+        "config": f"train_configs/{suite.config}", "paper_source": suite.paper_source, "gpu_command": gpu_command(suite),
+        "datasets": datasets_info, "variants": variants,
+        "cells": [cells[(v, d)] for v in variants for d in datasets if (v, d) in cells],
+    }
+    out.with_suffix(".json").write_text(json.dumps(payload, indent=2))
+
+
+# ------------------------------------------------------------------------------------------- main
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--suite", required=True, choices=sorted(SUITES))
+    ap.add_argument("--datasets", nargs="+", default=["all"], help="dataset names or 'all'")
+    ap.add_argument("--variants", nargs="+", default=["all"], help=f"{list(VARIANTS)} or 'all'")
+    ap.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
+    ap.add_argument("--steps", type=int, default=None, help=f"training steps (default: {CPU_STEPS} on cpu, {FULL_STEPS} on cuda)")
+    ap.add_argument("--batch-size", type=int, default=None, help=f"default: {CPU_BATCH} on cpu, {FULL_BATCH} on cuda")
+    ap.add_argument("--eval-episodes", type=int, default=None, help="per cell; a multiple of the suite's task count")
+    ap.add_argument("--eval-batch-size", type=int, default=10, help="parallel envs in lerobot-eval")
+    ap.add_argument("--eval-async", action="store_true", help="lerobot-eval's AsyncVectorEnv (default: sync envs)")
+    ap.add_argument("--ema-cutoff", type=float, default=None,
+                    help="default: the config's, or steps/10 when shorter (short budgets)")
+    ap.add_argument("--jobs", type=int, default=1, help="cells trained/evaluated in parallel")
+    ap.add_argument("--out", type=Path, default=None, help="markdown report (JSON next to it)")
+    ap.add_argument("--work-dir", type=Path, default=REPO_ROOT / "outputs" / "paper_experiments" / "runs")
+    ap.add_argument("--data-root", type=Path, default=REPO_ROOT / "outputs" / "paper_experiments" / "data")
+    ap.add_argument("--ogbench-episodes", type=int, default=None, help="generated episodes (default: official)")
+    ap.add_argument("--ogbench-episode-steps", type=int, default=None, help="rows per episode (default: official)")
+    ap.add_argument("--planar-frames", type=int, default=None, help="recorded frames (default: the paper's sizes)")
+    ap.add_argument("--train-arg", action="append", default=[], help="extra lerobot-train argument (repeatable)")
+    ap.add_argument("--eval-arg", action="append", default=[], help="extra lerobot-eval argument (repeatable)")
+    return ap
+
+
+def resolve_budget(args, suite: Suite) -> Budget:
+    gpu = args.device == "cuda"
+    steps = args.steps or (FULL_STEPS if gpu else CPU_STEPS)
+    batch = args.batch_size or (FULL_BATCH if gpu else CPU_BATCH)
+    episodes = args.eval_episodes or (suite.full_eval_episodes if gpu else suite.cpu_eval_episodes)
+    if steps < 1 or batch < 1 or episodes < 1 or args.jobs < 1 or args.eval_batch_size < 1:
+        raise ValueError(f"--steps, --batch-size, --eval-episodes, --eval-batch-size and --jobs must be >= 1, got "
+                         f"{steps}, {batch}, {episodes}, {args.eval_batch_size}, {args.jobs}")
+    if episodes % suite.num_tasks:
+        raise ValueError(f"--eval-episodes={episodes} must be a multiple of {suite.num_tasks} for suite {suite.name!r} "
+                         f"(every evaluation task equally often)")
+    ema = args.ema_cutoff
+    if ema is None:
+        paper_ema = json.loads((REPO_ROOT / "train_configs" / suite.config).read_text())["policy"]["ema_cutoff"]
+        ema = None if steps / 10 >= paper_ema else steps / 10
+    return Budget(device=args.device, steps=steps, batch_size=batch, eval_episodes=episodes,
+                  eval_batch_size=min(args.eval_batch_size, episodes), eval_async=args.eval_async, ema_cutoff=ema,
+                  num_workers=None if gpu else 0, train_args=list(args.train_arg), eval_args=list(args.eval_arg))
+
+
+def budget_tag(budget: Budget) -> str:
+    return f"{budget.device}-s{budget.steps}-b{budget.batch_size}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(argv)
+    suite = SUITES[args.suite]
+    datasets = parse_list(args.datasets, suite.datasets, f"{suite.name} dataset(s)")
+    variants = parse_list(args.variants, tuple(VARIANTS), "variant(s)")
+    budget = resolve_budget(args, suite)
+    tasks_follow_seed = True
+    if suite.name == "planar_push":
+        tasks_follow_seed = planar_tasks_follow_seed()
+        if not tasks_follow_seed and budget.eval_batch_size > 1:
+            print("planar_push pairs do not follow the reset seed: evaluating with batch size 1", flush=True)
+            budget.eval_batch_size = 1
+    out = args.out or REPO_ROOT / "benchmarks" / "results" / f"paper_experiments_{suite.name}_{budget_tag(budget)}.md"
+    spec = DataSpec(args.ogbench_episodes, args.ogbench_episode_steps, args.planar_frames)
+    start = time.perf_counter()
+
+    datasets_info, roots = {}, {}
+    for d in datasets:
+        root, cmd, wall = ensure_dataset(suite.name, d, args.data_root, spec)
+        roots[d] = root
+        datasets_info[d] = {"root": shell([str(root)]), "repo_id": dataset_repo_id(suite.name, d), "command": cmd,
+                            "generate_s": wall or None}
+
+    # The budget and dataset size name the cell directory, so another budget never reuses these results.
+    run_root = args.work_dir / suite.name / f"{budget_tag(budget)}{spec.tag(suite.name)}"
+    if budget.train_args or budget.eval_args:  # custom CLI arguments: keep apart from the stated budgets
+        run_root = run_root.with_name(run_root.name + "-custom")
+    jobs = [(v, d) for d in datasets for v in variants]
+    cells: dict[tuple[str, str], dict] = {}
+
+    def one(vd):
+        v, d = vd
+        try:
+            return vd, run_cell(suite, v, d, roots[d], run_root / d / v, budget, tasks_follow_seed)
+        except Exception as err:  # noqa: BLE001 - one failed cell must not stop the others
+            print(f"[{suite.name}/{d}/{v}] FAILED: {err}", file=sys.stderr, flush=True)
+            return vd, {"variant": v, "dataset": d, "error": str(err)[-2500:]}
+
+    with cf.ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        for vd, cell in pool.map(one, jobs):
+            cells[vd] = cell
+
+    write_report(out, suite, variants, datasets, cells, budget, argv, datasets_info, time.perf_counter() - start,
+                 tasks_follow_seed)
+    print(f"wrote {out} and {out.with_suffix('.json')}", flush=True)
+    print(results_table(suite, variants, datasets, cells), flush=True)
+    return 1 if any(c.get("error") for c in cells.values()) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,140 @@
+"""The paper-comparison runner (benchmarks/paper_experiments.py): eval parsing, tables, budgets, the fixed
+hyper-parameter configs, and a tiny real run (generated OGBench data, lerobot-train, lerobot-eval, resume)."""
+
+import argparse
+import importlib.util
+import json
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+spec = importlib.util.spec_from_file_location("paper_experiments", REPO / "benchmarks" / "paper_experiments.py")
+pe = importlib.util.module_from_spec(spec)
+sys.modules["paper_experiments"] = pe  # dataclasses look their module up there
+spec.loader.exec_module(pe)
+
+
+def eval_info(successes, seeds_start=pe.EVAL_SEED):
+    n = len(successes)
+    return {
+        "per_task": [{"task_group": "ogbench", "task_id": 0, "metrics": {"successes": successes, "sum_rewards": [0] * n}}],
+        "overall": {"pc_success": 100.0 * sum(successes) / n, "n_episodes": n},
+    }
+
+
+def test_parse_eval_info_splits_episodes_by_seed_task():
+    # seeds 1000..1009: 1000 % 5 = 0 -> task1, 1001 -> task2, ..., 1005 -> task1 again
+    ok = [True, False, True, False, False, True, True, False, False, False]
+    out = pe.parse_eval_info(eval_info(ok), num_tasks=5, task_prefix="task", first_task=1)
+    assert out["pc_success"] == 40.0 and out["n_episodes"] == 10 and out["n_success"] == 4
+    assert {k: v["pc_success"] for k, v in out["per_task"].items()} == {
+        "task1": 100.0, "task2": 50.0, "task3": 50.0, "task4": 0.0, "task5": 0.0}
+    planar = pe.parse_eval_info(eval_info(ok), num_tasks=10, task_prefix="pair", first_task=0, seed=7)
+    assert planar["per_task"]["pair7"]["pc_success"] == 100.0 and planar["per_task"]["pair8"]["pc_success"] == 0.0
+    assert pe.parse_eval_info(eval_info(ok), 10, "pair", 0, tasks_follow_seed=False)["per_task"] is None
+
+
+def test_parse_eval_info_rejects_malformed_files():
+    with pytest.raises(ValueError, match="pc_success"):
+        pe.parse_eval_info({"overall": {}, "per_task": []}, 5, "task", 1)
+    bad = eval_info([True, False])
+    bad["overall"]["n_episodes"] = 3
+    with pytest.raises(ValueError, match="n_episodes=3"):
+        pe.parse_eval_info(bad, 5, "task", 1)
+
+
+def test_parse_list_and_paper_numbers():
+    assert pe.parse_list(["all"], tuple(pe.VARIANTS), "variants") == list(pe.VARIANTS)
+    assert pe.parse_list(["as_rl,gc", "ac"], tuple(pe.VARIANTS), "variants") == ["gc", "ac", "as_rl"]
+    with pytest.raises(ValueError, match="'fm_gc'"):
+        pe.parse_list(["fm_gc"], tuple(pe.VARIANTS), "variants")
+    # spot checks against the paper (Fig. 5 and Fig. 7)
+    assert pe.SUITES["ogbench"].paper["ac_rl"]["pointmaze-large-navigate-v0"] == "89"
+    assert pe.SUITES["ogbench"].paper["as_rl"]["pointmaze-large-stitch-v0"] == "44"
+    assert pe.SUITES["planar_push"].paper["pc_rl"]["partitioned"] == "90±3"
+    assert pe.SUITES["planar_push"].paper["as"]["expert"] == "34±8"
+
+
+def test_results_table_sets_ours_next_to_paper():
+    suite = pe.SUITES["planar_push"]
+    cells = {("gc", "expert"): {"pc_success": 70.0}, ("ac_rl", "expert"): {"error": "boom"}}
+    table = pe.results_table(suite, ["gc", "ac_rl"], ["expert", "full"], cells)
+    lines = table.splitlines()
+    assert lines[0] == "| agent | Expert: ours | paper | Full: ours | paper |"
+    assert lines[2] == "| FM-GC | 70 | 96±5 | – | 65±4 |"
+    assert lines[3] == "| FM-AC use-RL | failed | 32±8 | – | 89±3 |"
+
+
+def budget_args(**kw):
+    base = dict(device="cpu", steps=None, batch_size=None, eval_episodes=None, eval_batch_size=10, eval_async=False,
+                ema_cutoff=None, jobs=1, train_arg=[], eval_arg=[])
+    return argparse.Namespace(**{**base, **kw})
+
+
+def test_budgets_state_cpu_defaults_and_check_episodes():
+    cpu = pe.resolve_budget(budget_args(), pe.SUITES["ogbench"])
+    assert (cpu.steps, cpu.batch_size, cpu.eval_episodes, cpu.num_workers) == (pe.CPU_STEPS, pe.CPU_BATCH, 10, 0)
+    assert cpu.ema_cutoff == pe.CPU_STEPS / 10  # shorter than the paper's 5000 at 2000 steps
+    gpu = pe.resolve_budget(budget_args(device="cuda"), pe.SUITES["planar_push"])
+    assert (gpu.steps, gpu.batch_size, gpu.eval_episodes, gpu.ema_cutoff) == (200_000, 128, 60, None)
+    with pytest.raises(ValueError, match="multiple of 10"):
+        pe.resolve_budget(budget_args(eval_episodes=15), pe.SUITES["planar_push"])
+
+
+@pytest.mark.parametrize("config, expected", [
+    ("ogbench_pointmaze_efm.json", dict(obs_traj_len=4, obs_traj_stride=16, action_traj_len=8, action_traj_stride=1,
+                                        max_goal_distance=200, action_mode="velocity", ema_cutoff=5000)),
+    ("planar_push_efm.json", dict(obs_traj_len=3, obs_traj_stride=10, action_traj_len=8, action_traj_stride=1,
+                                  max_goal_distance=600, action_mode="absolute", ema_cutoff=1000)),
+])
+def test_configs_hold_the_paper_hyper_parameters(config, expected):
+    cfg = json.loads((REPO / "train_configs" / config).read_text())
+    policy = cfg["policy"]
+    assert {k: policy[k] for k in expected} == expected
+    assert (policy["optimizer_lr"], policy["optimizer_weight_decay"], policy["device"]) == (1e-4, 1e-6, "cuda")
+    assert (cfg["steps"], cfg["batch_size"]) == (200_000, 128)
+
+
+TINY_TRAIN = ["--policy.mlp_hidden_dims=[32,32]", "--policy.unet_down_dims=[8,16,16]", "--policy.unet_n_groups=4",
+              "--policy.num_inference_steps=3"]
+
+
+def test_tiny_end_to_end_run_and_resume(tmp_path):
+    """2 agents x 1 generated OGBench dataset, 20 training steps, 5 eval episodes (one per task) of 60 steps."""
+    out = tmp_path / "report.md"
+    argv = ["--suite", "ogbench", "--datasets", "pointmaze-large-navigate-v0", "--variants", "gc", "ac_rl",
+            "--steps", "20", "--batch-size", "16", "--eval-episodes", "5", "--eval-batch-size", "5",
+            "--ogbench-episodes", "10", "--ogbench-episode-steps", "101", "--jobs", "2",
+            "--work-dir", str(tmp_path / "work"), "--data-root", str(tmp_path / "data"), "--out", str(out),
+            *[f"--train-arg={a}" for a in TINY_TRAIN], "--eval-arg=--env.episode_length=60"]
+    assert pe.main(argv) == 0
+
+    report = json.loads(out.with_suffix(".json").read_text())
+    cells = {c["variant"]: c for c in report["cells"]}
+    assert set(cells) == {"gc", "ac_rl"}
+    for v, policy_type, rl in (("gc", "efm_gc", "false"), ("ac_rl", "efm_ac", "true")):
+        cell = cells[v]
+        assert cell["n_episodes"] == 5 and 0.0 <= cell["pc_success"] <= 100.0
+        assert sorted(cell["per_task"]) == [f"task{k}" for k in range(1, 6)]
+        assert f"--policy.type={policy_type}" in cell["train_command"]
+        assert f"--policy.use_rl={rl}" in cell["train_command"]
+        assert "--config_path=train_configs/ogbench_pointmaze_efm.json" in cell["train_command"]
+        assert "--env.dataset=pointmaze-large-navigate-v0" in cell["eval_command"]
+        assert cell["paper"] == pe.SUITES["ogbench"].paper[v]["pointmaze-large-navigate-v0"]
+        saved = json.loads(next((tmp_path / "work").glob(f"ogbench/*/*/{v}/result.json")).read_text())
+        # the checkpoint really is the trained agent, with the suite's hyper-parameters
+        ckpt = json.loads(next((tmp_path / "work").glob(f"ogbench/*/*/{v}/train/checkpoints/last/pretrained_model/config.json")).read_text())
+        assert (ckpt["type"], ckpt["use_rl"], ckpt["obs_traj_stride"], ckpt["action_mode"]) == (policy_type, rl == "true", 16, "velocity")
+        assert saved["pc_success"] == cell["pc_success"]
+    md = out.read_text()
+    assert "**Budget: 20 training steps at batch 16 on `cpu`**" in md
+    assert "| FM-GC | " in md and "| 66 |" in md and "| 89 |" in md  # the paper's numbers next to ours
+    assert "--device cuda --steps 200000" in md
+
+    start = time.perf_counter()  # resume: every cell is cached, nothing is trained or evaluated again
+    assert pe.main(argv) == 0
+    assert time.perf_counter() - start < 5
+    assert all(c.get("cached") for c in json.loads(out.with_suffix(".json").read_text())["cells"])
