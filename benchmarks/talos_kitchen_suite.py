@@ -1,0 +1,98 @@
+"""Per-task success of trained checkpoints on the Talos kitchen suite, through LeRobot's own ``lerobot-eval``.
+
+One ``lerobot-eval`` run per (checkpoint, task); runs go ``--jobs`` at a time. Writes a markdown table and
+the raw numbers (JSON) with the exact commands.
+
+    python benchmarks/talos_kitchen_suite.py --policy efm_ac=outputs/talos/ac/checkpoints/last/pretrained_model \\
+        --policy efm_gc=outputs/talos/gc/checkpoints/last/pretrained_model --episodes 5 --jobs 2 \\
+        --out benchmarks/results/talos_kitchen_suite
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from lerobot_efm.envs.talos_kitchen.tasks import LONG_TASK, TASK_NAMES, TASKS
+
+BIN = Path(sys.executable).parent
+
+
+def eval_command(checkpoint: str, task: str, episodes: int, image_size: int, out: Path, extra: list[str]) -> list[str]:
+    return [str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--env.type=talos_kitchen", f"--env.task={task}",
+            f"--env.image_size={image_size}", f"--eval.n_episodes={episodes}", "--eval.batch_size=1",
+            "--policy.device=cpu", f"--output_dir={out}", *extra]
+
+
+def run_one(label: str, checkpoint: str, task: str, args, root: Path) -> dict:
+    out = root / label / task
+    cmd = eval_command(checkpoint, task, args.episodes, args.image_size, out, args.extra)
+    t0 = time.perf_counter()
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    seconds = time.perf_counter() - t0
+    if proc.returncode:
+        raise RuntimeError(f"lerobot-eval failed for {label}/{task}:\n{proc.stderr[-3000:]}")
+    info = json.loads((out / "eval_info.json").read_text())
+    successes = [bool(x) for t in info.get("per_task", []) for x in t["metrics"]["successes"]]
+    print(f"{label:>8} {task:<22} {info['overall']['pc_success']:5.1f}% ({seconds:.0f} s)", flush=True)
+    return {"label": label, "task": task, "pc_success": info["overall"]["pc_success"],
+            "n_episodes": info["overall"]["n_episodes"], "seconds": seconds,
+            "successes": successes, "command": " ".join(cmd)}
+
+
+def table(results: list[dict], labels: list[str]) -> str:
+    by = {(r["label"], r["task"]): r for r in results}
+    lines = ["| task | description | " + " | ".join(labels) + " |", "|---|---|" + "---|" * len(labels)]
+    for task in TASK_NAMES:
+        cells = [f"{by[(lab, task)]['pc_success']:.0f}%" if (lab, task) in by else "-" for lab in labels]
+        name = f"**{task}** (long)" if task == LONG_TASK else task
+        lines.append(f"| {name} | {TASKS[task].description} | " + " | ".join(cells) + " |")
+    means = []
+    for lab in labels:
+        vals = [by[(lab, t)]["pc_success"] for t in TASK_NAMES if (lab, t) in by]
+        means.append(f"{sum(vals) / max(1, len(vals)):.0f}%")
+    lines.append("| **mean** | | " + " | ".join(means) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--policy", action="append", required=True, help="LABEL=CHECKPOINT_DIR (repeatable)")
+    ap.add_argument("--tasks", nargs="*", default=list(TASK_NAMES))
+    ap.add_argument("--episodes", type=int, default=5, help="episodes per task")
+    ap.add_argument("--image-size", type=int, default=128,
+                    help="camera size of the env; a state-only policy does not look at it (smaller renders faster)")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--workdir", type=Path, default=Path("outputs/talos_suite"))
+    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/talos_kitchen_suite"))
+    ap.add_argument("--extra", nargs="*", default=[], help="more lerobot-eval flags, e.g. --env.episode_length=600")
+    args = ap.parse_args(argv)
+
+    policies = dict(p.split("=", 1) for p in args.policy)
+    jobs = [(lab, ckpt, task) for task in args.tasks for lab, ckpt in policies.items()]
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(args.jobs) as pool:
+        results = list(pool.map(lambda j: run_one(*j, args, args.workdir), jobs))
+    minutes = (time.perf_counter() - t0) / 60
+    labels = list(policies)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.with_suffix(".json").write_text(json.dumps({"policies": policies, "episodes_per_task": args.episodes,
+                                                         "results": results, "minutes": minutes}, indent=1))
+    md = table(results, labels)
+    args.out.with_suffix(".md").write_text(
+        f"# Talos kitchen suite: success per task ({args.episodes} episodes per task, lerobot-eval)\n\n{md}\n\n"
+        f"Wall time {minutes:.0f} min with {args.jobs} parallel lerobot-eval runs. Checkpoints: "
+        + ", ".join(f"`{k}` = `{v}`" for k, v in policies.items()) + ".\n\nCommand of one cell:\n\n```\n"
+        + results[0]["command"] + "\n```\n")
+    print(md)
+
+
+if __name__ == "__main__":
+    main()

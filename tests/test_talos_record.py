@@ -1,0 +1,75 @@
+"""The Talos kitchen end to end with LeRobot's own tools: ``lerobot-efm-record`` records scripted play
+(video), ``lerobot-dataset-viz`` shows it, ``lerobot-train`` trains ``efm_ac`` on it, ``lerobot-eval`` runs
+the checkpoint on a task of the suite."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+
+from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
+
+BIN = Path(sys.executable).parent
+ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": "egl", "OMP_NUM_THREADS": "1"}
+REPO = "local/talos_play_test"
+
+
+def run(*args, timeout=400):
+    proc = subprocess.run([str(a) for a in args], env=ENV, capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc
+
+
+@pytest.fixture(scope="module")
+def talos_play(tmp_path_factory):
+    root = tmp_path_factory.mktemp("talos") / "play"
+    run(BIN / "lerobot-efm-record", "--env.type=talos_kitchen", "--env.image_size=32", f"--root={root}",
+        f"--repo_id={REPO}", "--episodes=2", "--episode_length=70", "--seed=5")
+    return root
+
+
+def test_recording_is_a_lerobot_video_dataset(talos_play):
+    ds = LeRobotDataset(REPO, root=talos_play)
+    assert ds.num_episodes == 2 and ds.num_frames == 140 and ds.fps == 25
+    feats = ds.meta.features
+    assert feats["observation.images.front"]["dtype"] == "video"
+    assert feats["observation.state"]["names"][:3] == ["cmd_x", "cmd_y", "cmd_z"]
+    assert feats["observation.environment_state"]["names"][:2] == ["door", "tray"]
+    assert tuple(feats["action"]["shape"]) == (10,)
+    item = ds[100]
+    assert item["observation.images.front"].shape == (3, 32, 32)
+    actions = np.stack([ds[i]["action"].numpy() for i in range(70)])
+    state = np.stack([ds[i]["observation.state"].numpy() for i in range(70)])
+    assert np.isfinite(actions).all() and np.ptp(actions[:, :3], axis=0).max() > 0.01  # the operator moves the hand
+    np.testing.assert_allclose(state[1:, :3], np.clip(actions[:-1, :3], -10, 10), atol=1e-5)  # state holds the last command
+
+
+def test_dataset_viz_shows_the_recording(talos_play, tmp_path):
+    run(BIN / "lerobot-dataset-viz", f"--repo-id={REPO}", f"--root={talos_play}", "--episode-index=1",
+        "--save=1", f"--output-dir={tmp_path}", "--num-workers=0")
+    rrd = list(tmp_path.glob("*.rrd"))
+    assert rrd and rrd[0].stat().st_size > 10_000
+
+
+def test_train_and_eval_efm_ac_on_the_recording(talos_play, tmp_path):
+    out = tmp_path / "train"
+    run(BIN / "lerobot-train", "--policy.type=efm_ac", f"--dataset.repo_id={REPO}", f"--dataset.root={talos_play}",
+        "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.max_goal_distance=60",
+        "--policy.obs_traj_stride=5", "--policy.mlp_hidden_dims=[32,32]", "--policy.unet_down_dims=[8,16,16]",
+        "--policy.unet_n_groups=4", "--policy.image_encoder_channels=[4,8,8]", "--policy.image_encoder_hidden_dim=16",
+        "--policy.image_latent_dim=8", "--policy.num_inference_steps=2", "--steps=3", "--batch_size=4",
+        "--num_workers=0", "--save_freq=3", "--wandb.enable=false", f"--output_dir={out}")
+    ckpt = out / "checkpoints" / "last" / "pretrained_model"
+    cfg = json.loads((ckpt / "config.json").read_text())
+    assert {"observation.images.front", "observation.goal.images.front", "observation.goal.state"} <= set(cfg["input_features"])
+    run(BIN / "lerobot-eval", f"--policy.path={ckpt}", "--env.type=talos_kitchen", "--env.task=open_door",
+        "--env.image_size=32", "--env.episode_length=8", "--eval.n_episodes=1", "--eval.batch_size=1",
+        "--policy.device=cpu", f"--output_dir={tmp_path / 'eval'}")
+    info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
+    assert info["overall"]["n_episodes"] == 1 and 0.0 <= info["overall"]["pc_success"] <= 100.0
