@@ -265,13 +265,12 @@ def eval_command(suite: Suite, dataset: str, checkpoint: Path, out: Path, budget
             f"--policy.device={budget.device}", f"--seed={EVAL_SEED}", f"--output_dir={out}", *budget.eval_args]
 
 
-def parse_eval_info(info: dict, num_tasks: int, task_prefix: str, first_task: int, seed: int = EVAL_SEED,
-                    tasks_follow_seed: bool = True) -> dict:
+def parse_eval_info(info: dict, num_tasks: int, task_prefix: str, first_task: int, seed: int = EVAL_SEED) -> dict:
     """``eval_info.json`` -> success % overall and per evaluation task.
 
     With ``--env.task=all`` lerobot-eval reports one task holding per-episode ``successes``; episode i ran
     seed ``seed + i``, and our envs pick task ``first_task + seed % num_tasks`` for a seeded reset, which gives the
-    per-task split (left out when ``tasks_follow_seed`` is false)."""
+    per-task split."""
     try:
         overall = info["overall"]
         pc, n = float(overall["pc_success"]), int(overall["n_episodes"])
@@ -282,7 +281,7 @@ def parse_eval_info(info: dict, num_tasks: int, task_prefix: str, first_task: in
     if len(successes) != n:
         raise ValueError(f"eval_info.json: overall.n_episodes={n} but per_task holds {len(successes)} successes")
     out = {"pc_success": pc, "n_episodes": n, "n_success": int(sum(successes)), "per_task": None}
-    if tasks_follow_seed and n:
+    if n:
         per: dict[str, list[bool]] = {}
         for i, ok in enumerate(successes):
             per.setdefault(f"{task_prefix}{first_task + (seed + i) % num_tasks}", []).append(ok)
@@ -290,22 +289,7 @@ def parse_eval_info(info: dict, num_tasks: int, task_prefix: str, first_task: in
     return out
 
 
-def planar_tasks_follow_seed() -> bool:
-    """Whether a seeded ``planar_push`` reset with ``task=all`` picks pair ``seed % 10`` (then batched evaluation
-    runs every pair equally often). If the env instead cycles pairs per env instance, each env of a batch starts
-    at pair0, so the runner evaluates with batch size 1 to keep the 10-pair cycle exact."""
-    from lerobot_efm.envs.planar_push import PlanarPushEnv
-
-    env = PlanarPushEnv(task="all")
-    try:
-        picked = [env.reset(seed=s)[1]["task"] for s in (13, 13, 7)]
-    finally:
-        env.close()
-    return picked == ["pair3", "pair3", "pair7"]
-
-
-def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Path, budget: Budget,
-             tasks_follow_seed: bool) -> dict:
+def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Path, budget: Budget) -> dict:
     """Train (unless a finished checkpoint exists) and evaluate one cell; writes ``cell_dir/result.json``."""
     result_path = cell_dir / RESULT_FILE
     if result_path.exists():
@@ -323,7 +307,7 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
     print(f"[{suite.name}/{dataset}/{variant}] evaluating: {shell(ecmd)}", flush=True)
     eval_s = run_logged(ecmd, cell_dir / "eval.log")
     metrics = parse_eval_info(json.loads((eval_dir / "eval_info.json").read_text()), suite.num_tasks,
-                              suite.task_prefix, suite.first_task, EVAL_SEED, tasks_follow_seed)
+                              suite.task_prefix, suite.first_task, EVAL_SEED)
     result = {
         "suite": suite.name, "variant": variant, "agent": VARIANTS[variant][2], "policy_type": VARIANTS[variant][0],
         "use_rl": VARIANTS[variant][1], "dataset": dataset, **metrics,
@@ -382,7 +366,7 @@ def gpu_command(suite: Suite) -> str:
 
 
 def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[str], cells: dict, budget: Budget,
-                 argv: list[str], datasets_info: dict, wall_s: float, tasks_follow_seed: bool) -> None:
+                 argv: list[str], datasets_info: dict, wall_s: float) -> None:
     full = budget.steps >= FULL_STEPS and budget.batch_size >= FULL_BATCH
     cfg = json.loads((REPO_ROOT / "train_configs" / suite.config).read_text())
     ema = budget.ema_cutoff if budget.ema_cutoff is not None else cfg["policy"]["ema_cutoff"]
@@ -422,9 +406,6 @@ def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[st
     tasks_md = per_task_table(suite, variants, datasets, cells)
     if tasks_md:
         md += ["## Success per evaluation task (%)", "", tasks_md]
-    elif suite.name == "planar_push" and not tasks_follow_seed:
-        md += ["Per-pair success is not reported: this `planar_push` env cycles pairs per env instance rather than "
-               "by reset seed, so the evaluation ran with batch size 1 (the 10 pairs in order).", ""]
     md += ["## Wall time (s): train / eval", "",
            "| agent | " + " | ".join(suite.dataset_columns[d] for d in datasets) + " |",
            "|---|" + "---:|" * len(datasets)]
@@ -511,12 +492,6 @@ def main(argv: list[str] | None = None) -> int:
     datasets = parse_list(args.datasets, suite.datasets, f"{suite.name} dataset(s)")
     variants = parse_list(args.variants, tuple(VARIANTS), "variant(s)")
     budget = resolve_budget(args, suite)
-    tasks_follow_seed = True
-    if suite.name == "planar_push":
-        tasks_follow_seed = planar_tasks_follow_seed()
-        if not tasks_follow_seed and budget.eval_batch_size > 1:
-            print("planar_push pairs do not follow the reset seed: evaluating with batch size 1", flush=True)
-            budget.eval_batch_size = 1
     out = args.out or REPO_ROOT / "benchmarks" / "results" / f"paper_experiments_{suite.name}_{budget_tag(budget)}.md"
     spec = DataSpec(args.ogbench_episodes, args.ogbench_episode_steps, args.planar_frames)
     start = time.perf_counter()
@@ -538,7 +513,7 @@ def main(argv: list[str] | None = None) -> int:
     def one(vd):
         v, d = vd
         try:
-            return vd, run_cell(suite, v, d, roots[d], run_root / d / v, budget, tasks_follow_seed)
+            return vd, run_cell(suite, v, d, roots[d], run_root / d / v, budget)
         except Exception as err:  # noqa: BLE001 - one failed cell must not stop the others
             print(f"[{suite.name}/{d}/{v}] FAILED: {err}", file=sys.stderr, flush=True)
             return vd, {"variant": v, "dataset": d, "error": str(err)[-2500:]}
@@ -547,8 +522,7 @@ def main(argv: list[str] | None = None) -> int:
         for vd, cell in pool.map(one, jobs):
             cells[vd] = cell
 
-    write_report(out, suite, variants, datasets, cells, budget, argv, datasets_info, time.perf_counter() - start,
-                 tasks_follow_seed)
+    write_report(out, suite, variants, datasets, cells, budget, argv, datasets_info, time.perf_counter() - start)
     print(f"wrote {out} and {out.with_suffix('.json')}", flush=True)
     print(results_table(suite, variants, datasets, cells), flush=True)
     return 1 if any(c.get("error") for c in cells.values()) else 0

@@ -24,15 +24,23 @@ from lerobot_efm.envs.talos_kitchen.tasks import LONG_TASK, TASK_NAMES, TASKS
 BIN = Path(sys.executable).parent
 
 
-def eval_command(checkpoint: str, task: str, episodes: int, image_size: int, out: Path, extra: list[str]) -> list[str]:
+def num_subtasks(task: str) -> int:
+    """Objects whose state differs between the task's initial and goal state (door, tray, pot)."""
+    a, b = TASKS[task].initial, TASKS[task].goal
+    return int(a.door != b.door) + int(a.tray != b.tray) + int((a.pot_on, a.pot_xy) != (b.pot_on, b.pot_xy))
+
+
+def eval_command(checkpoint: str, task: str, episodes: int, image_size: int, steps_per_subtask: int, out: Path,
+                 extra: list[str]) -> list[str]:
     return [str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--env.type=talos_kitchen", f"--env.task={task}",
-            f"--env.image_size={image_size}", f"--eval.n_episodes={episodes}", "--eval.batch_size=1",
+            f"--env.image_size={image_size}", f"--env.episode_length={steps_per_subtask * num_subtasks(task)}",
+            f"--eval.n_episodes={episodes}", "--eval.batch_size=1",
             "--policy.device=cpu", f"--output_dir={out}", *extra]
 
 
 def run_one(label: str, checkpoint: str, task: str, args, root: Path) -> dict:
     out = root / label / task
-    cmd = eval_command(checkpoint, task, args.episodes, args.image_size, out, args.extra)
+    cmd = eval_command(checkpoint, task, args.episodes, args.image_size, args.steps_per_subtask, out, args.extra)
     t0 = time.perf_counter()
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
@@ -69,10 +77,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--episodes", type=int, default=5, help="episodes per task")
     ap.add_argument("--image-size", type=int, default=128,
                     help="camera size of the env; a state-only policy does not look at it (smaller renders faster)")
+    ap.add_argument("--steps-per-subtask", type=int, default=500,
+                    help="episode limit per object to move (the scripted operator needs 210-420 control steps per sub-task)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--workdir", type=Path, default=Path("outputs/talos_suite"))
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/talos_kitchen_suite"))
-    ap.add_argument("--extra", nargs="*", default=[], help="more lerobot-eval flags, e.g. --env.episode_length=600")
+    ap.add_argument("--extra", nargs="*", default=[], help="more lerobot-eval flags, e.g. --policy.n_action_steps=10")
     args = ap.parse_args(argv)
 
     policies = dict(p.split("=", 1) for p in args.policy)
@@ -88,6 +98,8 @@ def main(argv: list[str] | None = None) -> None:
     md = table(results, labels)
     args.out.with_suffix(".md").write_text(
         f"# Talos kitchen suite: success per task ({args.episodes} episodes per task, lerobot-eval)\n\n{md}\n\n"
+        f"Episode limit: {args.steps_per_subtask} control steps (20 s) per object to move (door, tray, pot), "
+        "e.g. 500 for open_door, 1500 for store_pot. "
         f"Wall time {minutes:.0f} min with {args.jobs} parallel lerobot-eval runs. Checkpoints: "
         + ", ".join(f"`{k}` = `{v}`" for k, v in policies.items()) + ".\n\nCommand of one cell:\n\n```\n"
         + results[0]["command"] + "\n```\n")
