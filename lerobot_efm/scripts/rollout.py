@@ -97,8 +97,9 @@ def _task_text(env) -> str:
 
 
 def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, postprocessor, log: RolloutLogger,
-                index: int, seed: int, max_steps: int, render: bool) -> dict:
-    """One episode in env 0 of a (1-env) vector env, as lerobot_eval's rollout, logging every step."""
+                index: int, seed: int, max_steps: int, render: bool, on_first_step=None) -> dict:
+    """One episode in env 0 of a (1-env) vector env, as lerobot_eval's rollout, logging every step;
+    ``on_first_step()`` is called once the first observation is logged."""
     from lerobot.envs.utils import NEW_ROLLOUT_OPTION, preprocess_observation
 
     policy.reset()
@@ -113,6 +114,8 @@ def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, 
         log.log_observation(step, obs)
         if render:
             log.log_render(step, env.call("render")[0])
+        if step == 0 and on_first_step is not None:
+            on_first_step()
         before = getattr(policy, "last_prediction", None)
         batch = preprocessor(dict(obs))
         with torch.inference_mode():
@@ -180,9 +183,14 @@ def rollout(cfg: RolloutConfig) -> list[dict]:
     results = []
     try:
         with torch.no_grad():
+            # The layout goes first too (cameras are known after the first step): a viewer that opens the file
+            # while it is written, or a headless screenshot, shows it at once. It is sent again at the end.
+            def send_layout():
+                rec.send_blueprint(log.blueprint(list(range(cfg.n_episodes))))
+
             for i in range(cfg.n_episodes):
                 results.append(run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, postprocessor,
-                                           log, i, cfg.seed + i, max_steps, cfg.render))
+                                           log, i, cfg.seed + i, max_steps, cfg.render, send_layout if i == 0 else None))
                 logger.info("episode %d: %s", i, results[-1])
         rec.send_blueprint(log.blueprint())
     finally:
@@ -201,9 +209,11 @@ def rollout_main(cfg: RolloutConfig) -> list[dict]:
     return results
 
 
-def main(argv: list[str] | None = None) -> list[dict]:
-    """Console entry point; ``main([...])`` runs in-process with those CLI arguments."""
-    return run_cli(rollout_main, argv, "rollout")
+def main(argv: list[str] | None = None) -> list[dict] | None:
+    """Console entry point; ``main([...])`` runs in-process with those CLI arguments and returns the summaries
+    (as a console script it returns nothing: a returned object would be printed)."""
+    summaries = run_cli(rollout_main, argv, "rollout")
+    return summaries if argv is not None else None
 
 
 if __name__ == "__main__":

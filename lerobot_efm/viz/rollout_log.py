@@ -526,14 +526,15 @@ class RolloutLogger:
                                                 f"success={bool(success)}", level=rr.TextLogLevel.INFO))
 
     # --- layout ------------------------------------------------------------------------------------
-    def blueprint(self) -> rrb.Blueprint:
-        """One tab per episode: cameras and goal images | the 3-D world | plots, events below. The side panels
-        start collapsed and the time cursor at the end of the recording (the whole trajectory shows)."""
+    def blueprint(self, episodes: list[int] | None = None) -> rrb.Blueprint:
+        """One tab per episode (``episodes``: indices; default the logged ones): cameras and goal images | the 3-D
+        world | plots, events below. The side panels start collapsed and the time cursor at the end of the
+        recording (the whole trajectory shows)."""
         eye = None if self.viz.eye is None else rrb.EyeControls3D(position=self.viz.eye[0], look_target=self.viz.eye[1],
                                                                   eye_up=(0.0, 0.0, 1.0))
         tabs = []
-        for e in self.episodes:
-            ep = f"episode_{e['index']}"
+        for index in [e["index"] for e in self.episodes] if episodes is None else episodes:
+            ep = f"episode_{index}"
             images = [rrb.Spatial2DView(origin=f"/{ep}/camera/{c}", name=c) for c in sorted(self.cameras)]
             images += [rrb.Spatial2DView(origin=f"/{ep}/goal/{c}", name=f"goal {c}") for c in sorted(self.goal_cameras)]
             world = rrb.Spatial3DView(origin="/", contents=["/scene/**", f"/{ep}/world/**"], name="world", eye_controls=eye)
