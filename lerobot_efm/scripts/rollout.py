@@ -183,8 +183,8 @@ def rollout(cfg: RolloutConfig) -> list[dict]:
     results = []
     try:
         with torch.no_grad():
-            # The layout goes first too (cameras are known after the first step): a viewer that opens the file
-            # while it is written, or a headless screenshot, shows it at once. It is sent again at the end.
+            # The layout goes early (cameras are known after the first step), not at the end: a viewer that opens
+            # the file while it is written, or a headless screenshot, shows it at once.
             def send_layout():
                 rec.send_blueprint(log.blueprint(list(range(cfg.n_episodes))))
 
@@ -192,7 +192,6 @@ def rollout(cfg: RolloutConfig) -> list[dict]:
                 results.append(run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, postprocessor,
                                            log, i, cfg.seed + i, max_steps, cfg.render, send_layout if i == 0 else None))
                 logger.info("episode %d: %s", i, results[-1])
-        rec.send_blueprint(log.blueprint())
     finally:
         rec.flush()
         rec.disconnect()
