@@ -492,6 +492,9 @@ def main(argv: list[str] | None = None) -> int:
     datasets = parse_list(args.datasets, suite.datasets, f"{suite.name} dataset(s)")
     variants = parse_list(args.variants, tuple(VARIANTS), "variant(s)")
     budget = resolve_budget(args, suite)
+    # --jobs trainings share the CPU: one OpenMP pool each of cpus/jobs threads (oversubscribed OpenMP pools
+    # spin-wait on each other and can stall for minutes on a loaded machine)
+    os.environ.setdefault("OMP_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // args.jobs)))
     out = args.out or REPO_ROOT / "benchmarks" / "results" / f"paper_experiments_{suite.name}_{budget_tag(budget)}.md"
     spec = DataSpec(args.ogbench_episodes, args.ogbench_episode_steps, args.planar_frames)
     start = time.perf_counter()

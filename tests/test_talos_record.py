@@ -16,6 +16,7 @@ pytest.importorskip("mujoco")
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 BIN = Path(sys.executable).parent
+PROJECT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": "egl", "OMP_NUM_THREADS": "1"}
 REPO = "local/talos_play_test"
 
@@ -29,7 +30,7 @@ def run(*args, timeout=400):
 @pytest.fixture(scope="module")
 def talos_play(tmp_path_factory):
     root = tmp_path_factory.mktemp("talos") / "play"
-    run(BIN / "lerobot-efm-record", "--env.type=talos_kitchen", "--env.image_size=32", f"--root={root}",
+    run(BIN / "lerobot-efm-record", "--env.type=talos_kitchen", f"--root={root}",
         f"--repo_id={REPO}", "--episodes=2", "--episode_length=70", "--seed=5")
     return root
 
@@ -43,7 +44,7 @@ def test_recording_is_a_lerobot_video_dataset(talos_play):
     assert feats["observation.environment_state"]["names"][:2] == ["door", "tray"]
     assert tuple(feats["action"]["shape"]) == (10,)
     item = ds[100]
-    assert item["observation.images.front"].shape == (3, 32, 32)
+    assert item["observation.images.front"].shape == (3, 128, 128)  # the env's default camera
     actions = np.stack([ds[i]["action"].numpy() for i in range(70)])
     state = np.stack([ds[i]["observation.state"].numpy() for i in range(70)])
     assert np.isfinite(actions).all() and np.ptp(actions[:, :3], axis=0).max() > 0.01  # the operator moves the hand
@@ -69,7 +70,18 @@ def test_train_and_eval_efm_ac_on_the_recording(talos_play, tmp_path):
     cfg = json.loads((ckpt / "config.json").read_text())
     assert {"observation.images.front", "observation.goal.images.front", "observation.goal.state"} <= set(cfg["input_features"])
     run(BIN / "lerobot-eval", f"--policy.path={ckpt}", "--env.type=talos_kitchen", "--env.task=open_door",
-        "--env.image_size=32", "--env.episode_length=8", "--eval.n_episodes=1", "--eval.batch_size=1",
+        "--env.episode_length=8", "--eval.n_episodes=1", "--eval.batch_size=1",
         "--policy.device=cpu", f"--output_dir={tmp_path / 'eval'}")
     info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1 and 0.0 <= info["overall"]["pc_success"] <= 100.0
+
+
+@pytest.mark.parametrize("config_file", sorted(p.name for p in (PROJECT / "train_configs").glob("talos_kitchen_*.json")))
+def test_shipped_talos_train_configs(talos_play, tmp_path, config_file):
+    """The shipped Talos configs (state-only CPU configs, the paper's image config) train on a recording."""
+    run(BIN / "lerobot-train", f"--config_path={PROJECT / 'train_configs' / config_file}", f"--dataset.repo_id={REPO}",
+        f"--dataset.root={talos_play}", "--policy.device=cpu", "--steps=2", "--save_freq=2", "--batch_size=4",
+        "--num_workers=0", f"--output_dir={tmp_path / 'run'}")
+    cfg = json.loads((tmp_path / "run" / "checkpoints" / "last" / "pretrained_model" / "config.json").read_text())
+    expected = json.loads((PROJECT / "train_configs" / config_file).read_text())["policy"]
+    assert cfg["type"] == expected["type"] and set(expected["input_features"]) <= set(cfg["input_features"])
