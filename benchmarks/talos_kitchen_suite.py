@@ -42,11 +42,12 @@ def run_one(label: str, checkpoint: str, task: str, args, root: Path) -> dict:
     out = root / label / task
     cmd = eval_command(checkpoint, task, args.episodes, args.image_size, args.steps_per_subtask, out, args.extra)
     t0 = time.perf_counter()
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if not (out / "eval_info.json").exists():  # resumable: a finished (label, task) is not re-run
+        env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        if proc.returncode:
+            raise RuntimeError(f"lerobot-eval failed for {label}/{task}:\n{proc.stderr[-3000:]}")
     seconds = time.perf_counter() - t0
-    if proc.returncode:
-        raise RuntimeError(f"lerobot-eval failed for {label}/{task}:\n{proc.stderr[-3000:]}")
     info = json.loads((out / "eval_info.json").read_text())
     successes = [bool(x) for t in info.get("per_task", []) for x in t["metrics"]["successes"]]
     print(f"{label:>8} {task:<22} {info['overall']['pc_success']:5.1f}% ({seconds:.0f} s)", flush=True)
@@ -70,9 +71,20 @@ def table(results: list[dict], labels: list[str]) -> str:
     return "\n".join(lines)
 
 
+def merged_table(json_files: list[Path]) -> str:
+    """One table from several runs' JSON files (e.g. policies evaluated separately)."""
+    results, labels = [], []
+    for f in json_files:
+        run = json.loads(Path(f).read_text())
+        results += run["results"]
+        labels += [lab for lab in run["policies"] if lab not in labels]
+    return table(results, labels)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--policy", action="append", required=True, help="LABEL=CHECKPOINT_DIR (repeatable)")
+    ap.add_argument("--merge", nargs="+", type=Path, help="print one table from these result JSON files and exit")
+    ap.add_argument("--policy", action="append", help="LABEL=CHECKPOINT_DIR (repeatable)")
     ap.add_argument("--tasks", nargs="*", default=list(TASK_NAMES))
     ap.add_argument("--episodes", type=int, default=5, help="episodes per task")
     ap.add_argument("--image-size", type=int, default=128,
@@ -84,6 +96,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/talos_kitchen_suite"))
     ap.add_argument("--extra", nargs="*", default=[], help="more lerobot-eval flags, e.g. --policy.n_action_steps=10")
     args = ap.parse_args(argv)
+    if args.merge:
+        print(merged_table(args.merge))
+        return
+    if not args.policy:
+        ap.error("--policy LABEL=CHECKPOINT_DIR is required (or --merge)")
 
     policies = dict(p.split("=", 1) for p in args.policy)
     jobs = [(lab, ckpt, task) for task in args.tasks for lab, ckpt in policies.items()]

@@ -10,7 +10,11 @@ import torch
 
 from lerobot.configs import PipelineFeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
+from lerobot.configs import FeatureType
 from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline
+from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+
+GOAL_STATE_KEY = "goal.state"  # env observation key; reaches the policy as observation.goal.state
 
 
 @dataclass
@@ -54,3 +58,30 @@ class GoalEnvConfig(EnvConfig):
     def get_env_processors(self):
         pre = PolicyProcessorPipeline(steps=[GoalImagesChannelFirstStep()])
         return pre, PolicyProcessorPipeline(steps=[])
+
+
+def state_goal_features(state_dim: int, action_dim: int) -> dict[str, PolicyFeature]:
+    """``EnvConfig.features`` of an env observing ``agent_pos`` with a goal state of the same size."""
+    return {
+        ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(action_dim,)),
+        "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(state_dim,)),
+        GOAL_STATE_KEY: PolicyFeature(type=FeatureType.STATE, shape=(state_dim,)),
+    }
+
+
+def state_goal_features_map(camera: str) -> dict[str, str]:
+    """``EnvConfig.features_map`` for :func:`state_goal_features` plus an optional camera and its goal image."""
+    return {
+        ACTION: ACTION,
+        "agent_pos": OBS_STATE,
+        GOAL_STATE_KEY: f"observation.{GOAL_STATE_KEY}",
+        f"{OBS_IMAGES}.{camera}": f"{OBS_IMAGES}.{camera}",  # identity: eval recording needs this form
+        f"goal.images.{camera}": f"observation.goal.images.{camera}",
+    }
+
+
+def add_camera_features(features: dict[str, PolicyFeature], camera: str, image_size: int) -> None:
+    """Declare the camera ``camera`` and its goal image (square, ``image_size`` pixels)."""
+    img = PolicyFeature(type=FeatureType.VISUAL, shape=(image_size, image_size, 3))
+    features[f"{OBS_IMAGES}.{camera}"] = img
+    features[f"goal.images.{camera}"] = img

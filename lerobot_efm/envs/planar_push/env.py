@@ -35,11 +35,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from lerobot.configs import FeatureType, PolicyFeature
+from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
-from ..goal_env import GoalEnvConfig
+from ..goal_env import GoalEnvConfig, add_camera_features, state_goal_features, state_goal_features_map
 from .maze import ARENA, EFFECTOR_RADIUS, OBJECT_RADIUS, wall_boxes, wall_distance
 
 GYM_ID = "lerobot_efm/PlanarPush-v0"
@@ -329,31 +328,15 @@ class PlanarPushEnvConfig(GoalEnvConfig):
     obs_type: str = "state"
     image_size: int = 96
     render_mode: str = "rgb_array"
-    features: dict[str, PolicyFeature] = field(
-        default_factory=lambda: {
-            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(2,)),
-            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(4,)),
-            GOAL_STATE_KEY: PolicyFeature(type=FeatureType.STATE, shape=(4,)),
-        }
-    )
-    features_map: dict[str, str] = field(
-        default_factory=lambda: {
-            ACTION: ACTION,
-            "agent_pos": OBS_STATE,
-            GOAL_STATE_KEY: OBS_GOAL_STATE,
-            f"{OBS_IMAGES}.{CAMERA}": f"{OBS_IMAGES}.{CAMERA}",  # identity: eval recording needs this form
-            GOAL_IMAGE_KEY: OBS_GOAL_IMAGE,
-        }
-    )
+    features: dict[str, PolicyFeature] = field(default_factory=lambda: state_goal_features(4, 2))
+    features_map: dict[str, str] = field(default_factory=lambda: state_goal_features_map(CAMERA))
 
     def __post_init__(self):
         check_task(self.task)
         if self.obs_type not in OBS_TYPES:
             raise ValueError(f"Unknown obs_type {self.obs_type!r}; valid: {list(OBS_TYPES)}")
         if self.obs_type == "pixels_state":
-            img = PolicyFeature(type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3))
-            self.features[f"{OBS_IMAGES}.{CAMERA}"] = img
-            self.features[GOAL_IMAGE_KEY] = img
+            add_camera_features(self.features, CAMERA, self.image_size)
 
     @property
     def gym_kwargs(self) -> dict:
