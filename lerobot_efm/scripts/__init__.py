@@ -8,14 +8,16 @@ from collections.abc import Callable
 
 def run_cli(entry: Callable, argv: list[str] | None, prog: str):
     """Run a ``parser.wrap()`` entry point as LeRobot's own CLIs do (logging set-up, plugin discovery);
-    with ``argv`` it runs in-process on those arguments (LeRobot's parser reads ``sys.argv``)."""
+    with ``argv`` it runs in-process on those arguments (LeRobot's parser reads ``sys.argv``) and returns the
+    entry point's result. Without ``argv`` (a console script) it returns None: a returned object would be printed."""
     from lerobot.utils.import_utils import register_third_party_plugins
     from lerobot.utils.utils import init_logging
 
     init_logging()
     register_third_party_plugins()
     if argv is None:
-        return entry()
+        entry()
+        return None
     saved = sys.argv
     sys.argv = [saved[0] if saved else prog, *argv]
     try:

@@ -97,10 +97,8 @@ def log_dataset_main(cfg: LogDatasetConfig) -> list[dict]:
 
 
 def main(argv: list[str] | None = None) -> list[dict] | None:
-    """Console entry point; ``main([...])`` runs in-process with those CLI arguments and returns the summaries
-    (as a console script it returns nothing: a returned object would be printed)."""
-    summaries = run_cli(log_dataset_main, argv, "log_dataset")
-    return summaries if argv is not None else None
+    """Console entry point; ``main([...])`` runs in-process with those CLI arguments and returns the summaries."""
+    return run_cli(log_dataset_main, argv, "log_dataset")
 
 
 if __name__ == "__main__":

@@ -79,8 +79,9 @@ def record(cfg: RecordConfig):
     return stats
 
 
-def main(argv: list[str] | None = None) -> None:
-    run_cli(record, argv, "lerobot-efm-record")  # console scripts print a returned object: return nothing
+def main(argv: list[str] | None = None):
+    """Console entry point; ``main([...])`` runs in-process and returns the :class:`RecordStats`."""
+    return run_cli(record, argv, "lerobot-efm-record")
 
 
 if __name__ == "__main__":

@@ -209,10 +209,8 @@ def rollout_main(cfg: RolloutConfig) -> list[dict]:
 
 
 def main(argv: list[str] | None = None) -> list[dict] | None:
-    """Console entry point; ``main([...])`` runs in-process with those CLI arguments and returns the summaries
-    (as a console script it returns nothing: a returned object would be printed)."""
-    summaries = run_cli(rollout_main, argv, "rollout")
-    return summaries if argv is not None else None
+    """Console entry point; ``main([...])`` runs in-process with those CLI arguments and returns the summaries."""
+    return run_cli(rollout_main, argv, "rollout")
 
 
 if __name__ == "__main__":
