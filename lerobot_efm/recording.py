@@ -25,6 +25,7 @@ import importlib
 import logging
 import signal
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -113,11 +114,47 @@ class RecordStats:
 
 
 class _Interrupt(Exception):
-    """SIGTERM, turned into an exception so that ``finally`` blocks run as for Ctrl-C."""
+    """SIGINT or SIGTERM, turned into an exception so that ``finally`` blocks run."""
 
 
-def _raise_interrupt(signum, frame):  # noqa: ARG001
-    raise _Interrupt(f"signal {signum}")
+class _InterruptGuard:
+    """Turns SIGINT/SIGTERM into :class:`_Interrupt`, except while an episode is being written.
+
+    ``save_episode`` consumes the episode buffer as it writes parquet, videos and metadata; a signal
+    in the middle would leave a half-written episode. Inside ``saving()`` a signal is only noted and
+    raised once the episode is complete, so an interrupt costs at most the unfinished episode.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.in_save, self.pending, self.previous = False, None, {}
+
+    def _handle(self, signum, frame):  # noqa: ARG002
+        if self.in_save:
+            self.pending = signum
+        else:
+            raise _Interrupt(f"signal {signum}")
+
+    def __enter__(self):
+        self.previous = {sig: signal.signal(sig, self._handle) for sig in self.SIGNALS}
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
+
+    @contextmanager
+    def saving(self):
+        self.in_save = True
+        try:
+            yield
+        finally:
+            self.in_save = False
+
+    def raise_pending(self):
+        if self.pending is not None:
+            raise _Interrupt(f"signal {self.pending}")
 
 
 def record_episodes(dataset: LeRobotDataset, env: gym.Env, operator, features_map: dict[str, str], *,
@@ -129,9 +166,9 @@ def record_episodes(dataset: LeRobotDataset, env: gym.Env, operator, features_ma
     recording goes on; ``max_failures`` failures in a row stop it. The caller finalizes the dataset.
     """
     stats, failures_in_row, t0 = RecordStats(), 0, time.perf_counter()
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
-    try:
+    with _InterruptGuard() as guard:
         for ep in range(episodes):
+            saved = False
             try:
                 env.reset(seed=seed + ep)
                 obs = operator.reset()
@@ -143,35 +180,49 @@ def record_episodes(dataset: LeRobotDataset, env: gym.Env, operator, features_ma
                     dataset.add_frame({**flatten_observation(obs, features_map), "action": action, "task": task})
                     obs, *_ = env.step(action)
                     n += 1
-                with SuppressProgressBars():
+                with guard.saving(), SuppressProgressBars():
                     dataset.save_episode()
-            except (KeyboardInterrupt, _Interrupt):
+                saved = True
+                stats.saved, stats.frames = stats.saved + 1, stats.frames + n
+                guard.raise_pending()
+            except _Interrupt:
                 stats.interrupted = True
-                logging.warning("Recording interrupted during episode %d: its frames are dropped, %d saved "
-                                "episodes are kept.", ep, stats.saved)
+                drop_unsaved_frames(dataset)
+                logging.warning("Recording interrupted during episode %d (%s); %d saved episodes are kept.", ep,
+                                "saved first" if saved else "its frames are dropped", stats.saved)
                 break
             except Exception as err:  # one bad episode must not lose the others
                 logging.exception("Episode %d failed and is dropped", ep)
                 stats.failed.append(f"episode {ep}: {type(err).__name__}: {err}")
+                drop_unsaved_frames(dataset)
                 failures_in_row += 1
-                if dataset.has_pending_frames():
-                    dataset.clear_episode_buffer()
                 if failures_in_row >= max_failures:
                     logging.error("%d episodes failed in a row; stopping.", failures_in_row)
                     break
                 continue
-            finally:
-                if stats.interrupted and dataset.has_pending_frames():
-                    dataset.clear_episode_buffer()
             failures_in_row = 0
-            stats.saved += 1
-            stats.frames += n
             if on_episode is not None:
                 on_episode(ep, n, stats)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        stats.seconds = time.perf_counter() - t0
+    stats.seconds = time.perf_counter() - t0
     return stats
+
+
+def drop_unsaved_frames(dataset: LeRobotDataset) -> None:
+    """Forget the frames of an episode that was not saved (also one whose ``save_episode`` failed midway,
+    which leaves LeRobot's episode buffer half-consumed, without its ``size``)."""
+    buffer = dataset.writer.episode_buffer if dataset.writer is not None else None
+    if buffer is not None and buffer.get("size", 1) > 0:
+        dataset.clear_episode_buffer()
+
+
+@contextmanager
+def finalizing(dataset: LeRobotDataset):
+    """Whatever happens inside, drop the unsaved episode and finalize, so saved episodes stay readable."""
+    try:
+        yield dataset
+    finally:
+        drop_unsaved_frames(dataset)
+        dataset.finalize()
 
 
 def open_dataset(root: Path, repo_id: str, fps: int, features: dict, resume: bool, robot_type: str | None,

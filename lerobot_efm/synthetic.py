@@ -16,6 +16,7 @@ import numpy as np
 
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.utils import SuppressProgressBars
+from lerobot_efm.recording import finalizing
 from lerobot_efm.envs.point_reach import (
     WALL_TOP, in_wall, move_point, render_scene, sample_free, segment_hits_wall,
 )
@@ -143,7 +144,7 @@ def make_point_play_dataset(
     ds = LeRobotDataset.create(
         repo_id, fps=FPS, features=play_features(with_images, image_size), root=root, use_videos=with_images
     )
-    try:
+    with finalizing(ds):  # keeps the already saved episodes readable even if recording fails mid-way
         for _ in range(num_episodes):
             states, actions = play_episode(rng, episode_length, wall)
             for s, a in zip(states.astype(np.float32), actions.astype(np.float32), strict=True):
@@ -153,10 +154,6 @@ def make_point_play_dataset(
                 ds.add_frame(frame)
             with SuppressProgressBars():  # LeRobot shows a "Map" bar per saved episode otherwise
                 ds.save_episode()
-    finally:  # keep the already saved episodes readable even if recording failed mid-way
-        if ds.has_pending_frames():
-            ds.clear_episode_buffer()
-        ds.finalize()
     return LeRobotDataset(repo_id, root=root)
 
 

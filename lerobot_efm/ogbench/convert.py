@@ -20,6 +20,7 @@ import numpy as np
 
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.utils import SuppressProgressBars
+from lerobot_efm.recording import finalizing
 
 FPS = 10
 REQUIRED_KEYS = ("observations", "actions", "terminals")
@@ -80,16 +81,12 @@ def convert_arrays(
     obs = np.ascontiguousarray(data["observations"], dtype=np.float32)
     act = np.ascontiguousarray(data["actions"], dtype=np.float32)
     ds = LeRobotDataset.create(repo_id, fps=fps, features=ogbench_features(obs.shape[1], act.shape[1]), root=root, use_videos=False)
-    try:
+    with finalizing(ds):  # keeps the already saved episodes readable even if conversion fails mid-way
         for start, end in episode_bounds(data["terminals"]):
             for t in range(start, end):
                 ds.add_frame({"observation.state": obs[t], "action": act[t], "task": task})
             with SuppressProgressBars():
                 ds.save_episode()
-    finally:  # keep the already saved episodes readable even if conversion failed mid-way
-        if ds.has_pending_frames():
-            ds.clear_episode_buffer()
-        ds.finalize()
     return LeRobotDataset(repo_id, root=root)
 
 

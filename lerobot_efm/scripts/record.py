@@ -10,6 +10,7 @@ Ctrl-C keeps every saved episode (the unfinished one is dropped) and finalizes t
 
 import logging
 import time
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,7 +19,7 @@ import numpy as np
 from lerobot.configs import parser
 from lerobot.envs.configs import EnvConfig
 from lerobot_efm.recording import (
-    dataset_features, flatten_observation, make_raw_env, open_dataset, operator_class, record_episodes,
+    dataset_features, finalizing, flatten_observation, make_raw_env, open_dataset, operator_class, record_episodes,
 )
 from lerobot_efm.scripts import run_cli
 
@@ -58,15 +59,10 @@ def record(cfg: RecordConfig):
         logging.info("episode %d: %d frames saved (%d episodes, %d frames, %.1f frames/s)", start + ep, n,
                      stats.saved, stats.frames, stats.frames / max(1e-9, time.perf_counter() - t0))
 
-    try:
+    with finalizing(dataset), closing(env):
         stats = record_episodes(dataset, env, operator, cfg.env.features_map, episodes=cfg.episodes,
                                 episode_length=cfg.episode_length, task=task, seed=cfg.seed + start,
                                 on_episode=progress)
-    finally:
-        if dataset.has_pending_frames():
-            dataset.clear_episode_buffer()
-        dataset.finalize()
-        env.close()
     logging.info("%s: %d episodes saved this run (%d frames, %.0f s)%s; dataset now %d episodes, %d frames",
                  Path(cfg.root).resolve(), stats.saved, stats.frames, stats.seconds,
                  " - interrupted" if stats.interrupted else "", dataset.meta.total_episodes, dataset.meta.total_frames)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from contextlib import closing
 from pathlib import Path
 
 import numpy as np
@@ -354,6 +355,7 @@ def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int 
     new LeRobot v3 dataset at ``root`` (must not exist). Expert episodes that do not reach their corner are
     dropped. Returns the dataset reopened read-only."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from lerobot_efm.recording import finalizing
     from lerobot.utils.utils import SuppressProgressBars
 
     from .env import FPS, PlanarPushEnv
@@ -373,7 +375,7 @@ def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int 
     ds = LeRobotDataset.create(repo_id, fps=FPS, features=planar_push_features(with_images, image_size), root=root,
                                use_videos=with_images)
     total, dropped, t0 = 0, 0, time.perf_counter()
-    try:
+    with finalizing(ds), closing(env):
         while total < num_frames:
             states, actions, images, finished = run_episode(env, operator, max_len)
             if behaviour == "expert" and not finished:
@@ -390,11 +392,6 @@ def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int 
             if verbose:
                 print(f"{behaviour}: {total}/{num_frames} frames, {ds.num_episodes} episodes, {dropped} dropped, "
                       f"{total / (time.perf_counter() - t0):.0f} frames/s", flush=True)
-    finally:
-        if ds.has_pending_frames():
-            ds.clear_episode_buffer()
-        ds.finalize()
-        env.close()
     return LeRobotDataset(repo_id, root=root)
 
 
