@@ -79,6 +79,7 @@ class Suite:
     full_eval_episodes: int
     cpu_eval_episodes: int
     episodes_note: str
+    progress_reward: bool = False  # env runs with a progress reward: sum_reward = share of the goal distance closed
 
 
 # Fig. 5 (OGBench success %, single run per cell in the paper); only the datasets we can generate offline.
@@ -122,7 +123,7 @@ SUITES: dict[str, Suite] = {
     "planar_push": Suite(
         name="planar_push",
         config="planar_push_efm.json",
-        env_args=("--env.type=planar_push", "--env.task=all"),
+        env_args=("--env.type=planar_push", "--env.task=all", "--env.reward=progress"),
         datasets=PLANAR_DATASETS,
         dataset_columns={"expert": "Expert", "full": "Full", "partitioned": "Partitioned"},
         num_tasks=10,
@@ -133,6 +134,7 @@ SUITES: dict[str, Suite] = {
         full_eval_episodes=60,
         cpu_eval_episodes=10,
         episodes_note="the 10 fixed (start, goal) pairs of `--env.task=all`",
+        progress_reward=True,
     ),
 }
 
@@ -275,17 +277,22 @@ def parse_eval_info(info: dict, num_tasks: int, task_prefix: str, first_task: in
         overall = info["overall"]
         pc, n = float(overall["pc_success"]), int(overall["n_episodes"])
         successes = [bool(s) for task in info["per_task"] for s in task["metrics"]["successes"]]
+        rewards = [float(r) for task in info["per_task"] for r in task["metrics"]["sum_rewards"]]
     except (KeyError, TypeError) as err:
         raise ValueError(f"eval_info.json lacks {err}; expected overall.pc_success, overall.n_episodes and "
-                         f"per_task[i].metrics.successes") from err
-    if len(successes) != n:
-        raise ValueError(f"eval_info.json: overall.n_episodes={n} but per_task holds {len(successes)} successes")
-    out = {"pc_success": pc, "n_episodes": n, "n_success": int(sum(successes)), "per_task": None}
+                         f"per_task[i].metrics.successes / sum_rewards") from err
+    if len(successes) != n or len(rewards) != n:
+        raise ValueError(f"eval_info.json: overall.n_episodes={n} but per_task holds {len(successes)} successes "
+                         f"and {len(rewards)} sum_rewards")
+    out = {"pc_success": pc, "n_episodes": n, "n_success": int(sum(successes)),
+           "mean_sum_reward": sum(rewards) / n if n else None, "per_task": None}
     if n:
-        per: dict[str, list[bool]] = {}
-        for i, ok in enumerate(successes):
-            per.setdefault(f"{task_prefix}{first_task + (seed + i) % num_tasks}", []).append(ok)
-        out["per_task"] = {k: {"pc_success": 100.0 * sum(v) / len(v), "n_episodes": len(v)} for k, v in sorted(per.items())}
+        per: dict[str, list[int]] = {}
+        for i in range(n):
+            per.setdefault(f"{task_prefix}{first_task + (seed + i) % num_tasks}", []).append(i)
+        out["per_task"] = {k: {"pc_success": 100.0 * sum(successes[i] for i in idx) / len(idx), "n_episodes": len(idx),
+                               "mean_sum_reward": sum(rewards[i] for i in idx) / len(idx)}
+                           for k, idx in sorted(per.items())}
     return out
 
 
@@ -340,6 +347,19 @@ def results_table(suite: Suite, variants: list[str], datasets: list[str], cells:
             ours = "failed" if cell and cell.get("error") else fmt_pct(cell.get("pc_success") if cell else None)
             parts.append(f"{ours} | {suite.paper[v][d]}")
         rows.append(f"| {VARIANTS[v][2]} | " + " | ".join(parts) + " |")
+    return "\n".join(rows)
+
+
+def progress_table(suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]) -> str:
+    """Rows = variants: mean share (%) of the initial goal distance closed at the end of the episode."""
+    rows = ["| agent | " + " | ".join(suite.dataset_columns[d] for d in datasets) + " |",
+            "|---|" + "---:|" * len(datasets)]
+    for v in variants:
+        values = []
+        for d in datasets:
+            r = (cells.get((v, d)) or {}).get("mean_sum_reward")
+            values.append(fmt_pct(None if r is None else 100.0 * r))
+        rows.append(f"| {VARIANTS[v][2]} | " + " | ".join(values) + " |")
     return "\n".join(rows)
 
 
@@ -403,6 +423,13 @@ def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[st
                "pipeline trains and evaluates every agent, not the paper's ranking.", ""]
     if failed:
         md += [f"Failed cells (see their `train.log` / `eval.log`): {', '.join(failed)}.", ""]
+    if suite.progress_reward and any(c.get("mean_sum_reward") is not None for c in cells.values()):
+        md += ["## Goal distance closed (%)", "",
+               "Mean over episodes of 1 - D_end / D_0, D = |disc - goal| + |effector - goal| (straight line): "
+               "lerobot-eval's `sum_reward` under `--env.reward=progress`. 100 = on the goal, 0 = no closer than at "
+               "the start, negative = further away. A graded score for budgets too small for successes; the "
+               "paper reports success only.", "",
+               progress_table(suite, variants, datasets, cells), ""]
     tasks_md = per_task_table(suite, variants, datasets, cells)
     if tasks_md:
         md += ["## Success per evaluation task (%)", "", tasks_md]

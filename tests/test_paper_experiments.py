@@ -17,10 +17,11 @@ sys.modules["paper_experiments"] = pe  # dataclasses look their module up there
 spec.loader.exec_module(pe)
 
 
-def eval_info(successes, seeds_start=pe.EVAL_SEED):
+def eval_info(successes, sum_rewards=None):
     n = len(successes)
+    sum_rewards = [0.0] * n if sum_rewards is None else sum_rewards
     return {
-        "per_task": [{"task_group": "ogbench", "task_id": 0, "metrics": {"successes": successes, "sum_rewards": [0] * n}}],
+        "per_task": [{"task_group": "ogbench", "task_id": 0, "metrics": {"successes": successes, "sum_rewards": sum_rewards}}],
         "overall": {"pc_success": 100.0 * sum(successes) / n, "n_episodes": n},
     }
 
@@ -32,13 +33,22 @@ def test_parse_eval_info_splits_episodes_by_seed_task():
     assert out["pc_success"] == 40.0 and out["n_episodes"] == 10 and out["n_success"] == 4
     assert {k: v["pc_success"] for k, v in out["per_task"].items()} == {
         "task1": 100.0, "task2": 50.0, "task3": 50.0, "task4": 0.0, "task5": 0.0}
-    planar = pe.parse_eval_info(eval_info(ok), num_tasks=10, task_prefix="pair", first_task=0, seed=7)
+    closed = [1.0, 0.2, 0.9, -0.1, 0.0, 1.0, 0.95, 0.3, 0.1, 0.05]  # progress reward sums
+    planar = pe.parse_eval_info(eval_info(ok, closed), num_tasks=10, task_prefix="pair", first_task=0, seed=7)
     assert planar["per_task"]["pair7"]["pc_success"] == 100.0 and planar["per_task"]["pair8"]["pc_success"] == 0.0
+    assert planar["mean_sum_reward"] == pytest.approx(0.44)
+    assert planar["per_task"]["pair0"]["mean_sum_reward"] == pytest.approx(-0.1)  # seed 1010 -> pair0
+    suite = pe.SUITES["planar_push"]
+    assert "--env.reward=progress" in suite.env_args and suite.progress_reward
+    table = pe.progress_table(suite, ["gc"], ["partitioned"], {("gc", "partitioned"): planar})
+    assert table.splitlines()[-1] == "| FM-GC | 44 |"
 
 
 def test_parse_eval_info_rejects_malformed_files():
     with pytest.raises(ValueError, match="pc_success"):
         pe.parse_eval_info({"overall": {}, "per_task": []}, 5, "task", 1)
+    with pytest.raises(ValueError, match="1 sum_rewards"):
+        pe.parse_eval_info(eval_info([True, False], [0.5]), 5, "task", 1)
     bad = eval_info([True, False])
     bad["overall"]["n_episodes"] = 3
     with pytest.raises(ValueError, match="n_episodes=3"):

@@ -108,6 +108,29 @@ def test_expert_solves_eval_pairs(env, pair):
     assert info["is_success"], (pair, info)
 
 
+def test_progress_reward_sums_to_the_closed_share_of_the_goal_distance():
+    env = PlanarPushEnv(task="pair3", reward="progress")
+    obs, info = env.reset()
+    d0 = info["object_distance"] + info["effector_distance"]
+    expert, total = ExpertReachGoal(env, np.random.default_rng(0), goal=env.goal), 0.0
+    obs = expert.reset()
+    for t in range(600):
+        obs, reward, terminated, _, info = env.step(expert.act(obs))
+        total += reward
+        if t == 20:  # partway: the sum so far is exactly the share closed so far
+            d = info["object_distance"] + info["effector_distance"]
+            assert total == pytest.approx(1 - d / d0, abs=1e-9)
+        if terminated:
+            break
+    assert info["is_success"] and total > 1 - 2 * SUCCESS_TOL / d0
+    env.reset(seed=3)
+    idle = sum(env.step(env.state[:2].astype(np.float32))[1] for _ in range(20))
+    assert abs(idle) < 0.01  # holding still closes nothing
+    with pytest.raises(ValueError, match="progress"):
+        PlanarPushEnvConfig(reward="dense")
+    env.close()
+
+
 @pytest.mark.parametrize("behaviour", sorted(BEHAVIOURS))
 def test_demonstrators_valid_actions(env, behaviour):
     cls, _, _ = BEHAVIOURS[behaviour]

@@ -20,9 +20,15 @@ view rendered by MuJoCo; goal markers are never drawn in observations, so a goal
 Action: absolute commanded effector position in [-1, 1]^2 (clipped), NaN/inf raise ``ValueError``.
 
 Tasks: ``pair0`` .. ``pair9`` = the fixed evaluation (initial, goal) pairs :data:`EVAL_PAIRS`; ``all`` cycles
-through them across resets. Success (``info["is_success"]``, reward 1, terminates) at any step when the disc
+through them across resets. Success (``info["is_success"]``, terminates) at any step when the disc
 AND the effector are each within :data:`SUCCESS_TOL` = 0.04 of their goal positions (paper: 600 steps,
 replanning every 6, success at any step).
+
+Reward (``reward=``; never used for training, which relabels goals in hindsight): ``"success"`` (default) is
+1 at success, else 0. ``"progress"`` is the share of the episode's initial goal distance D0 closed by the step,
+(D_prev - D) / D0 with D = |disc - disc goal| + |effector - effector goal| (straight-line, not through the
+maze), so lerobot-eval's ``sum_reward`` is 1 - D_end / D0: a graded score for small training budgets where
+every success rate is 0.
 """
 
 from __future__ import annotations
@@ -53,6 +59,7 @@ KP, MAX_FORCE, KD = 50.0, 5.0, 1.5
 SUCCESS_TOL = 0.04
 STATE_NAMES = ("eff_x", "eff_y", "obj_x", "obj_y")
 OBS_TYPES = ("state", "pixels_state")
+REWARDS = ("success", "progress")
 CAMERA = "top"
 GOAL_STATE_KEY = "goal.state"
 GOAL_IMAGE_KEY = f"goal.images.{CAMERA}"
@@ -161,8 +168,12 @@ class PlanarPushEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": FPS}
 
     def __init__(self, task: str = "pair0", obs_type: str = "state", image_size: int = 96,
-                 render_mode: str = "rgb_array", render_size: int = 256, terminate_on_success: bool = True):
+                 render_mode: str = "rgb_array", render_size: int = 256, terminate_on_success: bool = True,
+                 reward: str = "success"):
         self.suite = check_task(task)
+        if reward not in REWARDS:
+            raise ValueError(f"Unknown reward {reward!r}; valid: {list(REWARDS)}")
+        self.reward_type = reward
         if obs_type not in OBS_TYPES:
             raise ValueError(f"Unknown obs_type {obs_type!r}; valid: {list(OBS_TYPES)}")
         if render_mode != "rgb_array":
@@ -191,6 +202,7 @@ class PlanarPushEnv(gym.Env):
         self.observation_space = spaces.Dict(obs)
         self.action_space = spaces.Box(-ARENA, ARENA, shape=(2,), dtype=np.float32)
         self._reset_count = 0
+        self._initial_distance = self._last_distance = 1.0
         self._set_task(TASK_NAMES[0] if self.suite == ALL else self.suite)
         self.goal = EVAL_PAIRS[0][2].copy()
         self._goal_img: np.ndarray | None = None
@@ -283,6 +295,7 @@ class PlanarPushEnv(gym.Env):
             goal = options["goal"]
         self.goal = check_state(goal, "goal").copy()
         self.set_state(check_state(initial, "initial"))
+        self._initial_distance = self._last_distance = self._goal_distance()
         if self.obs_type == "pixels_state":
             self._goal_img = self.render_state(self.goal)
         return self.observe(), self._info()
@@ -302,7 +315,16 @@ class PlanarPushEnv(gym.Env):
             mj.mj_step(self.model, d)
         info = self._info()
         success = info["is_success"]
-        return self.observe(), float(success), bool(success and self.terminate_on_success), False, info
+        return self.observe(), self._reward(info), bool(success and self.terminate_on_success), False, info
+
+    def _goal_distance(self) -> float:
+        return float(sum(self.errors()))
+
+    def _reward(self, info: dict) -> float:
+        if self.reward_type == "success":
+            return float(info["is_success"])
+        before, self._last_distance = self._last_distance, self._goal_distance()
+        return (before - self._last_distance) / max(self._initial_distance, 1e-6)
 
     def render(self) -> np.ndarray:
         return self._render(self.render_size, show_goal=True)
@@ -328,6 +350,7 @@ class PlanarPushEnvConfig(GoalEnvConfig):
     obs_type: str = "state"
     image_size: int = 96
     render_mode: str = "rgb_array"
+    reward: str = "success"  # or "progress": share of the initial goal distance closed (see the module docstring)
     features: dict[str, PolicyFeature] = field(default_factory=lambda: state_goal_features(4, 2))
     features_map: dict[str, str] = field(default_factory=lambda: state_goal_features_map(CAMERA))
 
@@ -335,6 +358,8 @@ class PlanarPushEnvConfig(GoalEnvConfig):
         check_task(self.task)
         if self.obs_type not in OBS_TYPES:
             raise ValueError(f"Unknown obs_type {self.obs_type!r}; valid: {list(OBS_TYPES)}")
+        if self.reward not in REWARDS:
+            raise ValueError(f"Unknown --env.reward={self.reward!r}; valid: {list(REWARDS)}")
         if self.obs_type == "pixels_state":
             add_camera_features(self.features, CAMERA, self.image_size)
 
@@ -345,6 +370,7 @@ class PlanarPushEnvConfig(GoalEnvConfig):
             "obs_type": self.obs_type,
             "image_size": self.image_size,
             "render_mode": self.render_mode,
+            "reward": self.reward,
             "max_episode_steps": self.episode_length,
         }
 
