@@ -10,7 +10,8 @@ from lerobot.envs.factory import make_env
 from lerobot.envs.utils import preprocess_observation
 from lerobot_efm.envs import PlanarPushEnv, PlanarPushEnvConfig
 from lerobot_efm.envs.planar_push.demonstrators import (
-    BEHAVIOURS, ExpertReachGoal, PlayFullSpace, PlayPartitioned, disc_coverage, record_planar_push_dataset, run_episode,
+    BEHAVIOURS, ExpertReachGoal, PlayFullSpace, PlayPartitioned, disc_coverage, evaluate_expert,
+    record_planar_push_dataset, run_episode,
 )
 from lerobot_efm.envs.planar_push.env import EVAL_PAIRS, GYM_ID, SUCCESS_TOL, TASK_NAMES
 from lerobot_efm.envs.planar_push.maze import CELL, region_of, wall_distance
@@ -129,6 +130,8 @@ def test_progress_reward_sums_to_the_closed_share_of_the_goal_distance():
     with pytest.raises(ValueError, match="progress"):
         PlanarPushEnvConfig(reward="dense")
     env.close()
+    reference = evaluate_expert()  # the reference row of the agent tables
+    assert reference["pc_success"] == 100.0 and 95.0 < reference["pc_closed"] < 100.0
 
 
 @pytest.mark.parametrize("behaviour", sorted(BEHAVIOURS))

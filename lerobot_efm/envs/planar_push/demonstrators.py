@@ -348,6 +348,27 @@ def run_episode(env, operator, max_frames: int) -> tuple[np.ndarray, np.ndarray,
     return np.asarray(states, np.float32), np.asarray(actions, np.float32), images, finished
 
 
+def evaluate_expert(max_steps: int = 600) -> dict[str, float]:
+    """The scripted expert on the ten evaluation pairs under the paper's protocol: a reference row for agent
+    tables. Returns success % and the mean share (%) of the goal distance closed (``reward="progress"``)."""
+    from .env import EVAL_PAIRS, PlanarPushEnv
+
+    env, successes, closed = PlanarPushEnv(task="all", reward="progress"), [], []
+    for k in range(len(EVAL_PAIRS)):
+        env.reset(options={"pair": k})
+        expert = ExpertReachGoal(env, np.random.default_rng(k), goal=env.goal)
+        obs, total, info = expert.reset(), 0.0, {"is_success": False}
+        for _ in range(max_steps):
+            obs, reward, terminated, _, info = env.step(expert.act(obs))
+            total += reward
+            if terminated:
+                break
+        successes.append(info["is_success"])
+        closed.append(total)
+    env.close()
+    return {"pc_success": 100.0 * float(np.mean(successes)), "pc_closed": 100.0 * float(np.mean(closed))}
+
+
 def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int = 0, with_images: bool = False,
                                repo_id: str | None = None, image_size: int = 96, max_episode_frames: int | None = None,
                                verbose: bool = False):
