@@ -29,6 +29,7 @@ evaluation is missing is only re-evaluated. Datasets are generated once under ``
 from __future__ import annotations
 
 import argparse
+import importlib
 import concurrent.futures as cf
 import json
 import os
@@ -79,7 +80,9 @@ class Suite:
     full_eval_episodes: int
     cpu_eval_episodes: int
     episodes_note: str
-    progress_reward: bool = False  # env runs with a progress reward: sum_reward = share of the goal distance closed
+    progress_note: str = ""  # the env runs with --env.reward=progress: what its sum_reward (closed share) measures
+    reference: str = ""  # "module:function" returning a scripted reference's {"pc_success", "pc_closed"}
+    reference_name: str = ""
 
 
 # Fig. 5 (OGBench success %, single run per cell in the paper); only the datasets we can generate offline.
@@ -108,7 +111,7 @@ SUITES: dict[str, Suite] = {
     "ogbench": Suite(
         name="ogbench",
         config="ogbench_pointmaze_efm.json",
-        env_args=("--env.type=ogbench", "--env.task=all"),
+        env_args=("--env.type=ogbench", "--env.task=all", "--env.reward=progress"),
         datasets=OGBENCH_DATASETS,
         dataset_columns={"pointmaze-large-navigate-v0": "pointmaze-large-navigate", "pointmaze-large-stitch-v0": "pointmaze-large-stitch"},
         num_tasks=5,
@@ -119,6 +122,10 @@ SUITES: dict[str, Suite] = {
         full_eval_episodes=100,
         cpu_eval_episodes=10,
         episodes_note="OGBench task1..task5, seeded resets cycle them (task = seed % 5 + 1)",
+        progress_note="1 - C_end / C_0, C = maze cells between the point and the goal along OGBench's BFS map",
+        reference="lerobot_efm.ogbench.generate:evaluate_oracle",
+        reference_name="the noise-free BFS oracle (`oracle_direction`, privileged maze map; navigate and stitch "
+                       "share the maze and its five tasks)",
     ),
     "planar_push": Suite(
         name="planar_push",
@@ -134,7 +141,9 @@ SUITES: dict[str, Suite] = {
         full_eval_episodes=60,
         cpu_eval_episodes=10,
         episodes_note="the 10 fixed (start, goal) pairs of `--env.task=all`",
-        progress_reward=True,
+        progress_note="1 - D_end / D_0, D = |disc - goal| + |effector - goal| (straight line)",
+        reference="lerobot_efm.envs.planar_push.demonstrators:evaluate_expert",
+        reference_name="the scripted expert (`ExpertReachGoal`, privileged state)",
     ),
 }
 
@@ -431,19 +440,18 @@ def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[st
         md += [f"Failed cells (see their `train.log` / `eval.log`): {', '.join(failed)}.", ""]
     if len(cells) < len(variants) * len(datasets):
         md += ["`–`: not run at this budget.", ""]
-    if suite.progress_reward and any(c.get("mean_sum_reward") is not None for c in cells.values()):
-        from lerobot_efm.envs.planar_push.demonstrators import evaluate_expert
-
-        expert = evaluate_expert()
+    if suite.progress_note and any(c.get("mean_sum_reward") is not None for c in cells.values()):
         md += ["## Goal distance closed (%)", "",
-               "Mean over episodes of 1 - D_end / D_0, D = |disc - goal| + |effector - goal| (straight line): "
-               "lerobot-eval's `sum_reward` under `--env.reward=progress`. 100 = on the goal, 0 = no closer than at "
-               "the start (holding still), negative = further away. A graded score for budgets too small for "
-               "successes; the paper reports success only.", "",
-               progress_table(suite, variants, datasets, cells), "",
-               f"Reference, measured now: the scripted expert (`ExpertReachGoal`, privileged state, the same 600-step "
-               f"protocol) on the ten pairs: {expert['pc_success']:.0f} % success, {expert['pc_closed']:.0f} % closed.",
-               ""]
+               f"Mean over episodes of {suite.progress_note}: lerobot-eval's `sum_reward` under "
+               "`--env.reward=progress`. 100 = on the goal, 0 = no closer than at the start (holding still), "
+               "negative = further away. A graded score for budgets too small for successes; the paper reports "
+               "success only.", "",
+               progress_table(suite, variants, datasets, cells), ""]
+        if suite.reference:
+            module, func = suite.reference.split(":")
+            ref = getattr(importlib.import_module(module), func)()
+            md += [f"Reference, measured now: {suite.reference_name}, same protocol: {ref['pc_success']:.0f} % "
+                   f"success, {ref['pc_closed']:.0f} % closed.", ""]
     tasks_md = per_task_table(suite, variants, datasets, cells)
     if tasks_md:
         md += ["## Success per evaluation task (%)", "", tasks_md]

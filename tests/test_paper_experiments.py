@@ -39,7 +39,7 @@ def test_parse_eval_info_splits_episodes_by_seed_task():
     assert planar["mean_sum_reward"] == pytest.approx(0.44)
     assert planar["per_task"]["pair0"]["mean_sum_reward"] == pytest.approx(-0.1)  # seed 1010 -> pair0
     suite = pe.SUITES["planar_push"]
-    assert "--env.reward=progress" in suite.env_args and suite.progress_reward
+    assert "--env.reward=progress" in suite.env_args and suite.progress_note and suite.reference
     table = pe.progress_table(suite, ["gc"], ["partitioned"], {("gc", "partitioned"): planar})
     assert table.splitlines()[-1] == "| FM-GC | 44 |"
 

@@ -10,6 +10,10 @@ OGBench draws start/goal noise from the *global* ``np.random``: a seeded reset s
 LeRobot's seeds is reproducible. With ``task="all"`` a seeded reset runs task ``seed % 5 + 1`` (lerobot-eval's
 consecutive seeds cycle the five tasks, also across a batch of envs); unseeded resets take the next task.
 
+Reward: ``"success"`` (default) is OGBench's own. ``"progress"`` is the share of the start's maze distance to the
+goal closed by the step, counted in cells along OGBench's own BFS map (walls respected, teleporters ignored),
+so lerobot-eval's ``sum_reward`` is 1 - cells_end / cells_start: a graded score for budgets too small to succeed.
+
 ``ogbench`` (MuJoCo, dm_control) is imported only when an env is built. Renders are a cheap top-down map
 (walls, goal disc of the success radius, agent), since MuJoCo's software rendering costs ~0.2 s a frame;
 ``render_backend="mujoco"`` gives OGBench's camera view instead.
@@ -39,6 +43,7 @@ FPS = 10  # point env's render_fps (5 substeps of 0.02 s per action)
 TASK_NAMES = ("task1", "task2", "task3", "task4", "task5")
 TASKS = (*TASK_NAMES, "all")
 RENDER_BACKENDS = ("map", "mujoco")
+REWARDS = ("success", "progress")
 CELL_PX = 24  # map render: pixels per maze cell
 
 # dataset name -> (observation dim, action dim, OGBench episode limit). Env-only: any of these evaluates.
@@ -67,8 +72,11 @@ class OGBenchEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": FPS}
 
     def __init__(self, dataset: str = "pointmaze-large-navigate-v0", task: str = "all",
-                 render_backend: str = "map", render_mode: str = "rgb_array"):
+                 render_backend: str = "map", render_mode: str = "rgb_array", reward: str = "success"):
         self.dataset, self.task = check_dataset(dataset), check_task(task)
+        if reward not in REWARDS:
+            raise ValueError(f"Unknown reward {reward!r}; valid: {list(REWARDS)}")
+        self.reward_type = reward
         if render_backend not in RENDER_BACKENDS:
             raise ValueError(f"Unknown render_backend {render_backend!r}; valid: {list(RENDER_BACKENDS)}")
         self.render_backend, self.render_mode = render_backend, render_mode
@@ -84,6 +92,8 @@ class OGBenchEnv(gym.Env):
         self.task_description = self._describe(self.task_id)
         self._goal = np.zeros(obs_dim, np.float32)
         self._map: np.ndarray | None = None
+        self._cells_to_goal: np.ndarray | None = None  # BFS cell distances to the goal (progress reward)
+        self._initial_cells = self._last_cells = 1
 
     def _describe(self, task_id: int) -> str:
         info = self.maze.task_infos[task_id - 1]
@@ -115,7 +125,19 @@ class OGBenchEnv(gym.Env):
         self.task_description = self._describe(self.task_id)
         ob, info = self.maze.reset(seed=seed, options={"task_id": self.task_id, "render_goal": False})
         self._goal = np.asarray(info["goal"], np.float32)
+        if self.reward_type == "progress":
+            self._cells_to_goal = self.maze.get_oracle_subgoal(self.maze.get_xy(), self.maze.cur_goal_xy)[1]
+            self._initial_cells = self._last_cells = self._cells_from_goal()
         return self._obs(ob), {"is_success": False, "task_id": self.task_id}
+
+    def _cells_from_goal(self) -> int:
+        i, j = self.maze.xy_to_ij(self.maze.get_xy())
+        return int(self._cells_to_goal[i, j])
+
+    def _progress(self, success: bool) -> float:
+        cells = 0 if success else self._cells_from_goal()
+        before, self._last_cells = self._last_cells, cells
+        return (before - cells) / max(self._initial_cells, 1)
 
     def step(self, action):
         a = np.asarray(action, dtype=np.float64).reshape(-1)
@@ -123,6 +145,8 @@ class OGBenchEnv(gym.Env):
             raise ValueError(f"OGBench action must be {self.action_space.shape[0]} finite numbers, got {np.asarray(action)!r}")
         ob, reward, terminated, truncated, info = self.maze.step(np.clip(a, -1.0, 1.0))
         success = bool(info["success"])
+        if self.reward_type == "progress":
+            reward = self._progress(success)
         return self._obs(ob), float(reward), bool(terminated), bool(truncated), {"is_success": success, "task_id": self.task_id}
 
     def render(self) -> np.ndarray:
@@ -165,6 +189,7 @@ class OGBenchEnvConfig(GoalEnvConfig):
     episode_length: int = 1000  # OGBench's limit for mazes
     render_backend: str = "map"
     render_mode: str = "rgb_array"
+    reward: str = "success"  # or "progress": share of the maze distance to the goal closed (module docstring)
     features: dict[str, PolicyFeature] = field(default_factory=dict)
     features_map: dict[str, str] = field(
         default_factory=lambda: {ACTION: ACTION, "agent_pos": OBS_STATE, GOAL_STATE_KEY: OBS_GOAL_STATE}
@@ -175,6 +200,8 @@ class OGBenchEnvConfig(GoalEnvConfig):
         check_task(self.task)
         if self.render_backend not in RENDER_BACKENDS:
             raise ValueError(f"Unknown render_backend {self.render_backend!r}; valid: {list(RENDER_BACKENDS)}")
+        if self.reward not in REWARDS:
+            raise ValueError(f"Unknown --env.reward={self.reward!r}; valid: {list(REWARDS)}")
         obs_dim, act_dim, _ = DATASETS[self.dataset]
         self.features = {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(act_dim,)),
@@ -189,6 +216,7 @@ class OGBenchEnvConfig(GoalEnvConfig):
             "task": self.task,
             "render_backend": self.render_backend,
             "render_mode": self.render_mode,
+            "reward": self.reward,
             "max_episode_steps": self.episode_length,
         }
 
