@@ -20,7 +20,9 @@ default is ``CPU_STEPS`` steps at batch ``CPU_BATCH`` (stated in the report); th
 updates), and LeRobot's cosine schedule scales its warm-up/decay to the budget by itself.
 
 Resumable: a cell whose ``result.json`` exists under ``--work-dir`` is not re-run; a finished training whose
-evaluation is missing is only re-evaluated. Datasets are generated once under ``--data-root``.
+evaluation is missing is only re-evaluated. Datasets are generated once under ``--data-root``. Cells of
+several invocations (or machines) meet in one report through ``--cached-only`` and ``--import-report`` (the
+committed JSON of an earlier report with the same budget).
 
     python benchmarks/paper_experiments.py --suite planar_push --variants all --device cpu
     python benchmarks/paper_experiments.py --suite ogbench --device cuda --steps 200000 --eval-episodes 100 --jobs 3
@@ -230,17 +232,44 @@ def ensure_dataset(suite: str, dataset: str, data_root: Path, spec: DataSpec) ->
 
     A cached dataset reports the command and time saved next to it when it was generated (else None, 0)."""
     root = dataset_root(data_root, suite, dataset, spec)
-    provenance = root.with_name(f"{root.name}.generated.json")
     if (root / "meta" / "info.json").exists():
-        saved = json.loads(provenance.read_text()) if provenance.exists() else {}
-        return root, saved.get("command"), float(saved.get("seconds", 0.0))
+        return (root, *dataset_provenance(root))
     shutil.rmtree(root, ignore_errors=True)  # a half-written dataset from an interrupted run
     shutil.rmtree(Path(f"{root}-npz"), ignore_errors=True)
     cmd = generate_command(suite, dataset, root, spec)
     print(f"generating {suite}/{dataset}: {shell(cmd)}", flush=True)
     wall = run_logged(cmd, data_root / suite / f"{root.name}.log")
-    provenance.write_text(json.dumps({"command": shell(cmd), "seconds": round(wall, 1)}, indent=2))
+    provenance_path(root).write_text(json.dumps({"command": shell(cmd), "seconds": round(wall, 1)}, indent=2))
     return root, shell(cmd), wall
+
+
+def provenance_path(root: Path) -> Path:
+    return root.with_name(f"{root.name}.generated.json")
+
+
+def dataset_provenance(root: Path) -> tuple[str | None, float]:
+    """(generating command, seconds) saved next to a generated dataset; (None, 0) when unknown."""
+    path = provenance_path(root)
+    saved = json.loads(path.read_text()) if path.exists() else {}
+    return saved.get("command"), float(saved.get("seconds", 0.0))
+
+
+def import_report(report: Path, suite_name: str, budget: "Budget", run_root: Path) -> dict[str, dict]:
+    """Write the cells of an earlier report's JSON (e.g. the committed one) as finished cells of this budget.
+
+    Lets a fresh checkout add cells to committed results without re-running them; cells already on disk win.
+    Returns the report's dataset notes (provenance of datasets that may no longer exist here)."""
+    payload = json.loads(report.read_text())
+    ours = json.loads(json.dumps(asdict(budget)))
+    if payload.get("suite") != suite_name or payload.get("budget") != ours:
+        raise ValueError(f"--import-report {report}: its suite {payload.get('suite')!r} and budget "
+                         f"{payload.get('budget')} must equal this run's {suite_name!r} and {ours}")
+    for cell in payload["cells"]:
+        path = run_root / cell["dataset"] / cell["variant"] / RESULT_FILE
+        if not cell.get("error") and not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps({k: v for k, v in cell.items() if k != "cached"}, indent=2))
+    return payload.get("datasets", {})
 
 
 # ------------------------------------------------------------------------------------------- one cell
@@ -503,6 +532,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--cached-only", action="store_true",
                     help="run nothing: report the finished cells of this budget (e.g. from several invocations)")
     ap.add_argument("--out", type=Path, default=None, help="markdown report (JSON next to it)")
+    ap.add_argument("--import-report", type=Path, action="append", default=[],
+                    help="JSON of an earlier report with this budget: its cells count as finished (repeatable)")
     ap.add_argument("--work-dir", type=Path, default=REPO_ROOT / "outputs" / "paper_experiments" / "runs")
     ap.add_argument("--data-root", type=Path, default=REPO_ROOT / "outputs" / "paper_experiments" / "data")
     ap.add_argument("--ogbench-episodes", type=int, default=None, help="generated episodes (default: official)")
@@ -551,20 +582,26 @@ def main(argv: list[str] | None = None) -> int:
     spec = DataSpec(args.ogbench_episodes, args.ogbench_episode_steps, args.planar_frames)
     start = time.perf_counter()
 
+    # The budget and dataset size name the cell directory, so another budget never reuses these results.
+    run_root = args.work_dir / suite.name / f"{budget_tag(budget)}{spec.tag(suite.name)}"
+    if budget.train_args or budget.eval_args:  # custom CLI arguments: keep apart from the stated budgets
+        run_root = run_root.with_name(run_root.name + "-custom")
+    imported: dict[str, dict] = {}
+    for report in args.import_report:
+        imported.update(import_report(report, suite.name, budget, run_root))
+
     datasets_info, roots = {}, {}
     for d in datasets:
         if args.cached_only:
-            root, cmd, wall = dataset_root(args.data_root, suite.name, d, spec), None, 0.0
+            root = dataset_root(args.data_root, suite.name, d, spec)
+            (cmd, wall) = dataset_provenance(root)
         else:
             root, cmd, wall = ensure_dataset(suite.name, d, args.data_root, spec)
         roots[d] = root
         datasets_info[d] = {"root": shell([str(root)]), "repo_id": dataset_repo_id(suite.name, d), "command": cmd,
                             "generate_s": wall or None}
-
-    # The budget and dataset size name the cell directory, so another budget never reuses these results.
-    run_root = args.work_dir / suite.name / f"{budget_tag(budget)}{spec.tag(suite.name)}"
-    if budget.train_args or budget.eval_args:  # custom CLI arguments: keep apart from the stated budgets
-        run_root = run_root.with_name(run_root.name + "-custom")
+        if cmd is None and (imported.get(d) or {}).get("command"):
+            datasets_info[d] = imported[d]
     jobs = [(v, d) for d in datasets for v in variants]
     cells: dict[tuple[str, str], dict] = {}
 
