@@ -594,13 +594,13 @@ def main(argv: list[str] | None = None) -> int:
     for d in datasets:
         if args.cached_only:
             root = dataset_root(args.data_root, suite.name, d, spec)
-            (cmd, wall) = dataset_provenance(root)
+            cmd, wall = dataset_provenance(root)
         else:
             root, cmd, wall = ensure_dataset(suite.name, d, args.data_root, spec)
         roots[d] = root
         datasets_info[d] = {"root": shell([str(root)]), "repo_id": dataset_repo_id(suite.name, d), "command": cmd,
                             "generate_s": wall or None}
-        if cmd is None and (imported.get(d) or {}).get("command"):
+        if cmd is None and imported.get(d, {}).get("command"):  # generated elsewhere: keep that report's note
             datasets_info[d] = imported[d]
     jobs = [(v, d) for d in datasets for v in variants]
     cells: dict[tuple[str, str], dict] = {}
