@@ -193,9 +193,25 @@ class EFMAgent(nn.Module, abc.ABC):
         return self.critic.distance(torch.cat([obs, goal], -1), cfg.critic_inference_eps, cfg.num_inference_steps)
 
     # --- training ----------------------------------------------------------------------------------
-    def training_rows(self, batch: dict[str, Tensor], target: EFMAgent) -> TrainingRows:
+    def num_bootstrap_rows(self, batch_size: int, step: int | None) -> int:
+        """Eq. (5) rows this update: none without RL or during ``rl_warmup_steps``, then ramped linearly to
+        the batch size over ``rl_ramp_steps`` updates. ``step=None`` (outside a training loop) = fully on."""
         cfg = self.config
-        use_rl = cfg.use_rl and cfg.uses_critic
+        if not (cfg.use_rl and cfg.uses_critic):
+            return 0
+        if step is None:
+            return batch_size
+        since = int(step) - cfg.rl_warmup_steps
+        if since < 0:
+            return 0
+        if cfg.rl_ramp_steps == 0:
+            return batch_size
+        return min(batch_size, round(batch_size * (since + 1) / cfg.rl_ramp_steps))
+
+    def training_rows(self, batch: dict[str, Tensor], target: EFMAgent, step: int | None = None) -> TrainingRows:
+        cfg = self.config
+        n_rl = self.num_bootstrap_rows(batch["action"].shape[0], step)
+        use_rl = n_rl > 0
         prefixes = (OBS_PREFIX, GOAL_PREFIX) + ((RL_GOAL_PREFIX,) if use_rl else ())
         latents = self.encode(batch, prefixes)
         l_obs, l_goal = latents[0], latents[1]
@@ -226,7 +242,9 @@ class EFMAgent(nn.Module, abc.ABC):
         goal_free = rows
 
         if use_rl:
-            rows = rows.cat(self.bootstrap_rows(batch, target, l_obs, latents[2], distance, actions, obs_traj))
+            head = {k: v[:n_rl] for k, v in batch.items() if k.startswith((GOAL_PREFIX, RL_GOAL_PREFIX))}
+            rows = rows.cat(self.bootstrap_rows(head, target, l_obs[:n_rl], latents[2][:n_rl], distance[:n_rl],
+                                                actions[:n_rl], None if obs_traj is None else obs_traj[:n_rl]))
         return TrainingRows(rows, goal_free)
 
     @torch.no_grad()
@@ -245,14 +263,18 @@ class EFMAgent(nn.Module, abc.ABC):
     def losses(self, rows: TrainingRows) -> dict[str, Tensor]:
         """One flow-matching loss per component, keyed by component name."""
 
-    def compute_loss(self, batch: dict[str, Tensor], target: EFMAgent) -> tuple[Tensor, dict[str, float]]:
-        rows = self.training_rows(batch, target)
+    def compute_loss(self, batch: dict[str, Tensor], target: EFMAgent, step: int | None = None) -> tuple[Tensor, dict[str, float]]:
+        """``step``: updates done so far (the RL warm-up and ramp read it; None = RL fully on)."""
+        rows = self.training_rows(batch, target, step)
         losses = self.losses(rows)
         total = sum(self.config.critic_loss_weight * v if k == "critic" else v for k, v in losses.items())
         info = {f"loss_{k}": v.item() for k, v in losses.items()}
         info["rows"] = float(rows.goal_conditioned.obs.shape[0])
+        n_rl = self.num_bootstrap_rows(batch["action"].shape[0], step)
         if self.config.use_rl:
-            bootstrap = rows.goal_conditioned.distance[-batch["action"].shape[0] :]
+            info["rl_rows"] = float(n_rl)
+        if n_rl:
+            bootstrap = rows.goal_conditioned.distance[-n_rl:]
             info["rl_target_distance"] = bootstrap.mean().item() * self.config.max_goal_distance
         return total, info
 

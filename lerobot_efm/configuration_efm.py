@@ -70,6 +70,11 @@ class EFMConfig(PreTrainedConfig):
     RL recursive bootstrap (paper eq. 5):
         use_rl: add rows (o, tau, d + Critic(eps_g | g, g'), g') with g' drawn from the whole dataset.
         rl_goal_ratio: r_g, eps_g ~ U(0, r_g) (reference: 0.3).
+        rl_warmup_steps: updates trained without bootstrap rows, so that the EMA critic bootstraps only once it
+            has learnt something (0 = from the first update, the paper's setting; a barely trained critic gives
+            eq. 5 noise targets, which cost short CPU budgets more than the stitching gains).
+        rl_ramp_steps: after the warm-up the number of bootstrap rows grows linearly from 0 to the batch size
+            over these updates (0 = all at once).
 
     Training:
         num_critics: critics trained side by side; every value uses their max (pessimistic for a distance).
@@ -103,6 +108,8 @@ class EFMConfig(PreTrainedConfig):
 
     use_rl: bool = False
     rl_goal_ratio: float = 0.3
+    rl_warmup_steps: int = 0
+    rl_ramp_steps: int = 0
 
     num_critics: int = 2
     critic_loss_weight: float = 0.1
@@ -160,6 +167,8 @@ class EFMConfig(PreTrainedConfig):
             "num_critics": self.num_critics >= 1,
             "reached_augment_size": self.reached_augment_size >= 0,
             "rl_goal_ratio": 0.0 <= self.rl_goal_ratio <= 1.0,
+            "rl_warmup_steps": self.rl_warmup_steps >= 0,
+            "rl_ramp_steps": self.rl_ramp_steps >= 0,
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
             "n_action_steps": 1 <= self.n_action_steps <= (self.action_traj_len - 1) * self.action_traj_stride + 1,
         }

@@ -68,7 +68,7 @@ class EFMPolicy(PreTrainedPolicy):
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
         self._check_training_batch(batch)
-        loss, info = self.model.compute_loss(batch, self.ema_model)
+        loss, info = self.model.compute_loss(batch, self.ema_model, step=int(self.ema_updates.item()))
         return loss, info
 
     @torch.no_grad()

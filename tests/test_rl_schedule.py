@@ -1,0 +1,69 @@
+"""The RL warm-up and ramp options: no eq. (5) rows before ``rl_warmup_steps`` updates, then a linear ramp of
+their number to the batch size over ``rl_ramp_steps``; the defaults (0, 0) are the paper's setting."""
+
+import pytest
+import torch
+from conftest import tiny_config
+from torch.utils.data import DataLoader
+
+from lerobot.policies.factory import make_policy, make_pre_post_processors
+from lerobot_efm.hindsight import HindsightGoalDataset
+
+
+def _policy_and_batch(dataset, **overrides):
+    cfg = tiny_config("efm_ac", use_rl=True, **overrides)
+    wrapped = HindsightGoalDataset(dataset, cfg)
+    policy = make_policy(cfg, ds_meta=wrapped.meta)
+    pre, _ = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
+    return policy, pre(next(iter(DataLoader(wrapped, batch_size=8, shuffle=True))))
+
+
+def test_schedule_counts():
+    from lerobot_efm.agents import make_agent
+
+    model = make_agent(_with_features(tiny_config("efm_ac", use_rl=True, rl_warmup_steps=10, rl_ramp_steps=4)))
+    counts = [model.num_bootstrap_rows(8, s) for s in (0, 9, 10, 11, 12, 13, 14, 100)]
+    assert counts == [0, 0, 2, 4, 6, 8, 8, 8]
+    assert model.num_bootstrap_rows(8, None) == 8  # outside a training loop: fully on
+    paper = make_agent(_with_features(tiny_config("efm_ac", use_rl=True)))
+    assert [paper.num_bootstrap_rows(8, s) for s in (0, 1, 5000)] == [8, 8, 8]
+    no_rl = make_agent(_with_features(tiny_config("efm_ac", rl_warmup_steps=0)))
+    assert no_rl.num_bootstrap_rows(8, 10_000) == 0
+
+
+def _with_features(cfg):
+    from lerobot.configs.types import FeatureType, PolicyFeature
+
+    cfg.input_features = {"observation.state": PolicyFeature(FeatureType.STATE, (2,))}
+    cfg.output_features = {"action": PolicyFeature(FeatureType.ACTION, (2,))}
+    return cfg
+
+
+def test_policy_forward_follows_the_update_counter(state_dataset):
+    """EFMPolicy.forward reads its EMA update counter: rows grow from batch + reached to + all bootstrap rows."""
+    policy, batch = _policy_and_batch(state_dataset, rl_warmup_steps=2, rl_ramp_steps=2)
+    rows = []
+    for _ in range(5):
+        _, info = policy.forward(batch)
+        rows.append((info["rows"], info["rl_rows"], "rl_target_distance" in info))
+        policy.update()
+    base = 8 + 4  # batch + reached rows (tiny config: reached_augment_size=4)
+    assert rows == [(base, 0, False), (base, 0, False), (base + 4, 4, True), (base + 8, 8, True), (base + 8, 8, True)]
+
+
+def test_invalid_schedule_is_rejected():
+    with pytest.raises(ValueError, match="rl_warmup_steps=-1"):
+        tiny_config("efm_ac", use_rl=True, rl_warmup_steps=-1)
+    with pytest.raises(ValueError, match="rl_ramp_steps=-3"):
+        tiny_config("efm_ac", use_rl=True, rl_ramp_steps=-3)
+
+
+def test_bootstrap_rows_take_the_batch_head(state_dataset):
+    """Ramped bootstrap rows are the first n rows of the batch: same observations and actions, RL goals."""
+    policy, batch = _policy_and_batch(state_dataset, rl_warmup_steps=0, rl_ramp_steps=4)
+    rows = policy.model.training_rows(batch, policy.ema_model, step=1).goal_conditioned  # 8 * 2/4 = 4 rows
+    n, base = 4, 8 + 4
+    assert rows.obs.shape[0] == base + n
+    torch.testing.assert_close(rows.obs[base:], rows.obs[:n])
+    torch.testing.assert_close(rows.actions[base:], batch["action"][:n])
+    torch.testing.assert_close(rows.goal[base:], batch["observation.rl_goal.state"][:n])  # identity encoder
