@@ -151,6 +151,35 @@ def test_expert_reaches_its_corner(env):
     assert done and np.linalg.norm(env.state[2:] - op.target) < 0.04
 
 
+def _frames_at_rest(states, tol=0.01):
+    """Trailing frames whose disc and effector are within ``tol`` of the episode's last state."""
+    near = np.all(np.linalg.norm((states - states[-1]).reshape(len(states), 2, 2), axis=-1) < tol, axis=-1)
+    return len(near) - int(np.flatnonzero(~near)[-1]) - 1 if (~near).any() else len(near)
+
+
+def test_expert_rests_on_its_goal_like_a_human(env):
+    """Expert episodes end with a human-like rest on the goal, longer than the trajectory window (30 frames),
+    so reached states and stopping are start frames of training tuples; the resting command is the hand."""
+    rests = []
+    for seed in range(4):
+        op = ExpertReachGoal(env, np.random.default_rng(seed), rest=(40, 60))
+        states, actions, _, done = run_episode(env, op, 600)
+        assert done and np.linalg.norm(states[-1, 2:] - op.target) < 0.04
+        rests.append(_frames_at_rest(states))
+        assert np.linalg.norm(actions[-1] - states[-1, :2]) < 0.01  # "stay" = command on the hand
+    assert min(rests) >= 35, rests
+
+
+def test_play_pauses_hold_still(env):
+    """Play pauses last 20-100 frames and follow half of the disc legs: disc and hand stay put meanwhile."""
+    op = PlayFullSpace(env, np.random.default_rng(0))
+    states, actions, _, _ = run_episode(env, op, 800)
+    speed = np.linalg.norm(np.diff(states, axis=0), axis=1)
+    still = np.r_[speed < 2e-3, False]
+    runs = np.diff(np.flatnonzero(np.diff(np.r_[0, still.astype(int), 0])))[::2]  # lengths of still runs
+    assert (runs >= 15).sum() >= 2, runs
+
+
 @pytest.mark.parametrize("region", [0, 1, 2])
 def test_partitioned_stays_in_region(env, region):
     op = PlayPartitioned(env, np.random.default_rng(region), region=region)

@@ -39,6 +39,13 @@ MAX_LEAD = 0.1  # full push: spring force 5 (the clip)
 CORNER = ARENA - OBJECT_RADIUS - 0.03
 CORNERS = np.array([[-CORNER, -CORNER], [CORNER, -CORNER], [-CORNER, CORNER], [CORNER, CORNER]])
 START_MARGIN = 0.16  # random disc starts/targets: room for the effector between disc and wall
+# Human operators rest on a reached goal: in the authors' expert recordings the disc rests at its final spot
+# for a median of 91 frames. Without a rest the last max(L_o*S_o, L_a*S_a) frames of an episode, i.e. the
+# final approach and the stop, are never training start frames, and stopping on a goal is never observed.
+EXPERT_REST = (40, 140)  # frames held at the goal at the end of an expert episode (median 90)
+PLAY_REST = (20, 100)  # frames of a play pause (after a disc leg with probability PLAY_REST_AFTER_DISC)
+PLAY_REST_AFTER_DISC = 0.5
+REST_NOISE = 0.002  # a resting hand's tremor on the command
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -151,17 +158,20 @@ class ExpertReachGoal:
     current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
 
     def __init__(self, env, rng: np.random.Generator, goal=None, noise: float = 0.003, min_path: float = 0.8,
-                 tolerance: float = 0.025):
+                 tolerance: float = 0.025, rest: tuple[int, int] = EXPERT_REST):
         self.env, self.rng, self.noise, self.min_path, self.tol = env, rng, float(noise), float(min_path), tolerance
         self.fixed_goal = None if goal is None else np.asarray(goal, dtype=np.float64).reshape(4)
+        self.rest = (int(rest[0]), int(rest[1]))
         self.pusher = Pusher()
         self.target = CORNERS[0].copy()
         self.effector_goal: np.ndarray | None = None
         self._pushing = True
         self._done = False
+        self._rest_left: int | None = None  # frames still to rest on the goal (None: not arrived yet)
+        self._rest_at = np.zeros(2)
 
     def reset(self) -> dict:
-        self._done, self._pushing = False, True
+        self._done, self._pushing, self._rest_left = False, True, None
         if self.fixed_goal is not None:
             self.effector_goal, self.target = self.fixed_goal[:2].copy(), self.fixed_goal[2:].copy()
             return self.env.observe()
@@ -179,16 +189,20 @@ class ExpertReachGoal:
     def act(self, obs: dict) -> np.ndarray:
         s = np.asarray(obs["agent_pos"], dtype=np.float64)
         eff, obj = s[:2], s[2:]
+        if self._rest_left is not None:  # arrived: hold still where the hand stopped, then finish
+            self._rest_left -= 1
+            self._done = self._rest_left <= 0
+            return _clip(self._rest_at + self.rng.normal(0.0, REST_NOISE, 2))
         err = float(np.linalg.norm(obj - self.target))
         # hysteresis: stop pushing within tol, push again if the disc drifted past 1.5 tol
         self._pushing = err > (self.tol if self._pushing else 1.5 * self.tol)
         if self._pushing:
             cmd = self.pusher.push(s, self.target, final=True)
-        elif self.effector_goal is not None:
+        elif self.effector_goal is not None and np.linalg.norm(eff - self.effector_goal) > self.tol:
             cmd = self.pusher.move_effector(eff, obj, self.effector_goal)
         else:
-            cmd = eff.copy()
-            self._done = True
+            self._rest_left, self._rest_at = int(self.rng.integers(self.rest[0], self.rest[1] + 1)), eff.copy()
+            return self.act(obs)
         return _clip(cmd + self.rng.normal(0.0, self.noise, 2))
 
     @property
@@ -231,7 +245,7 @@ class PlayFullSpace:
         r = self.rng.random()
         self._budget, self._lead = self.leg_budget, self.rng.uniform(0.06, MAX_LEAD)
         if r < 0.12:
-            self._queue = [("pause", np.array([self.rng.integers(5, 25), 0.0]))]
+            self._queue = [self._pause()]
         elif r < 0.3:
             self._queue = [("effector", self._random_effector_point(s[2:]))]
         else:
@@ -239,6 +253,12 @@ class PlayFullSpace:
             self._queue = [("disc", target)]
             if self.rng.random() < 0.3:  # detour through another point first
                 self._queue.insert(0, ("disc", self.pusher.sample_disc(self.rng)))
+            if self.rng.random() < PLAY_REST_AFTER_DISC:  # a human often lets go once the disc is there
+                self._queue.append(self._pause())
+
+    def _pause(self) -> tuple[str, np.ndarray]:
+        """A rest of human-like length; the hand holds where it is when the pause starts."""
+        return "pause", np.array([self.rng.integers(PLAY_REST[0], PLAY_REST[1] + 1), np.nan, np.nan])
 
     def act(self, obs: dict) -> np.ndarray:
         s = np.asarray(obs["agent_pos"], dtype=np.float64)
@@ -253,8 +273,9 @@ class PlayFullSpace:
                     self._queue.pop(0)
                     continue
                 target[0] -= 1
-                cmd = eff + self.rng.normal(0.0, 0.002, 2)
-                break
+                if np.isnan(target[1]):
+                    target[1:] = eff
+                return _clip(target[1:] + self.rng.normal(0.0, REST_NOISE, 2))  # a resting hand: no leg noise
             reached = (np.linalg.norm(obj - target) < 0.08) if kind == "disc" else (np.linalg.norm(eff - target) < 0.04)
             if reached or self._budget <= 0:
                 self._queue.pop(0)
