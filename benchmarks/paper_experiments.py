@@ -261,9 +261,10 @@ def import_report(report: Path, suite_name: str, budget: "Budget", run_root: Pat
     Returns the report's dataset notes (provenance of datasets that may no longer exist here)."""
     payload = json.loads(report.read_text())
     ours = json.loads(json.dumps(asdict(budget)))
-    if payload.get("suite") != suite_name or payload.get("budget") != ours:
+    theirs = {"config": None, "seed": 1000, "curve_points": 1, **(payload.get("budget") or {})}  # older reports
+    if payload.get("suite") != suite_name or theirs != ours:
         raise ValueError(f"--import-report {report}: its suite {payload.get('suite')!r} and budget "
-                         f"{payload.get('budget')} must equal this run's {suite_name!r} and {ours}")
+                         f"{theirs} must equal this run's {suite_name!r} and {ours}")
     for cell in payload["cells"]:
         path = run_root / cell["dataset"] / cell["variant"] / RESULT_FILE
         if not cell.get("error") and not path.exists():
@@ -286,20 +287,37 @@ class Budget:
     num_workers: int | None
     train_args: list[str] = field(default_factory=list)  # extra lerobot-train arguments (e.g. tiny networks)
     eval_args: list[str] = field(default_factory=list)  # extra lerobot-eval arguments
+    config: str | None = None  # train config under train_configs/ (None: the suite's paper-size config)
+    seed: int = 1000  # lerobot-train's --seed (the configs' value by default)
+    curve_points: int = 1  # checkpoints saved (every steps/curve_points) and evaluated: the learning curve
+
+
+def config_name(suite: Suite, budget: Budget) -> str:
+    return budget.config or suite.config
+
+
+def load_config(suite: Suite, budget: Budget) -> dict:
+    return json.loads((REPO_ROOT / "train_configs" / config_name(suite, budget)).read_text())
 
 
 def train_command(suite: Suite, variant: str, data: Path, repo_id: str, out: Path, budget: Budget) -> list[str]:
     policy_type, use_rl, _ = VARIANTS[variant]
-    cmd = [str(BIN / "lerobot-train"), f"--config_path={REPO_ROOT / 'train_configs' / suite.config}",
+    cmd = [str(BIN / "lerobot-train"), f"--config_path={REPO_ROOT / 'train_configs' / config_name(suite, budget)}",
            f"--policy.type={policy_type}", f"--policy.use_rl={str(use_rl).lower()}",
            f"--dataset.repo_id={repo_id}", f"--dataset.root={data}", f"--output_dir={out}",
-           f"--policy.device={budget.device}", f"--steps={budget.steps}", f"--save_freq={budget.steps}",
+           f"--policy.device={budget.device}", f"--steps={budget.steps}", f"--seed={budget.seed}",
+           f"--save_freq={curve_step(budget, 1)}",
            f"--batch_size={budget.batch_size}", f"--log_freq={max(1, min(1000, budget.steps // 20))}"]
     if budget.ema_cutoff is not None:
         cmd.append(f"--policy.ema_cutoff={budget.ema_cutoff:g}")
     if budget.num_workers is not None:
         cmd.append(f"--num_workers={budget.num_workers}")
     return cmd + list(budget.train_args)
+
+
+def curve_step(budget: Budget, k: int) -> int:
+    """Training step of the k-th (1-based) evaluated checkpoint; the last one is ``budget.steps``."""
+    return budget.steps * k // budget.curve_points
 
 
 def eval_command(suite: Suite, dataset: str, checkpoint: Path, out: Path, budget: Budget) -> list[str]:
@@ -353,17 +371,26 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
         print(f"[{suite.name}/{dataset}/{variant}] training: {shell(tcmd)}", flush=True)
         train_time.write_text(f"{run_logged(tcmd, cell_dir / 'train.log'):.1f}\n")
     train_s = float(train_time.read_text()) if train_time.exists() else None
+    curve = []
+    for k in range(1, budget.curve_points):  # intermediate checkpoints, each evaluated once (resumable)
+        step = curve_step(budget, k)
+        point = evaluate_checkpoint(suite, dataset, train_dir / "checkpoints" / f"{step:06d}" / "pretrained_model",
+                                    cell_dir / f"eval_{step:06d}", budget, f"{suite.name}/{dataset}/{variant}@{step}")
+        curve.append(curve_point(point, step, budget, train_s))
     shutil.rmtree(eval_dir, ignore_errors=True)
     ecmd = eval_command(suite, dataset, checkpoint, eval_dir, budget)
     print(f"[{suite.name}/{dataset}/{variant}] evaluating: {shell(ecmd)}", flush=True)
     eval_s = run_logged(ecmd, cell_dir / "eval.log")
     metrics = parse_eval_info(json.loads((eval_dir / "eval_info.json").read_text()), suite.num_tasks,
                               suite.task_prefix, suite.first_task, EVAL_SEED)
+    curve.append(curve_point(metrics, budget.steps, budget, train_s))
     result = {
         "suite": suite.name, "variant": variant, "agent": VARIANTS[variant][2], "policy_type": VARIANTS[variant][0],
         "use_rl": VARIANTS[variant][1], "dataset": dataset, **metrics,
         "paper": suite.paper[variant][dataset], "steps": budget.steps, "batch_size": budget.batch_size,
-        "device": budget.device, "train_s": train_s, "eval_s": eval_s,
+        "device": budget.device, "train_s": train_s, "eval_s": eval_s, "seed": budget.seed,
+        "config": f"train_configs/{config_name(suite, budget)}",
+        "steps_per_s": round(budget.steps / train_s, 2) if train_s else None, "curve": curve,
         "train_command": shell(tcmd), "eval_command": shell(ecmd),
         "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
@@ -371,6 +398,29 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
     print(f"[{suite.name}/{dataset}/{variant}] success {metrics['pc_success']:.0f}% "
           f"(paper {result['paper']})", flush=True)
     return result
+
+
+def evaluate_checkpoint(suite: Suite, dataset: str, checkpoint: Path, eval_dir: Path, budget: Budget, name: str) -> dict:
+    """lerobot-eval of one intermediate checkpoint; its metrics are cached in ``eval_dir/metrics.json``."""
+    cached = eval_dir / "metrics.json"
+    if cached.exists():
+        return json.loads(cached.read_text())
+    shutil.rmtree(eval_dir, ignore_errors=True)
+    ecmd = eval_command(suite, dataset, checkpoint, eval_dir / "lerobot_eval", budget)
+    print(f"[{name}] evaluating: {shell(ecmd)}", flush=True)
+    run_logged(ecmd, eval_dir / "eval.log")
+    metrics = parse_eval_info(json.loads((eval_dir / "lerobot_eval" / "eval_info.json").read_text()),
+                              suite.num_tasks, suite.task_prefix, suite.first_task, EVAL_SEED)
+    cached.write_text(json.dumps(metrics, indent=2))
+    return metrics
+
+
+def curve_point(metrics: dict, step: int, budget: Budget, train_s: float | None) -> dict:
+    """One point of the learning curve. CPU minutes of training up to ``step`` assume the constant step rate
+    of the whole run (checkpoint saving aside, LeRobot's training loop does the same work every step)."""
+    minutes = None if train_s is None else round(train_s * step / budget.steps / 60.0, 2)
+    return {"step": step, "train_min": minutes, "pc_success": metrics["pc_success"],
+            "mean_sum_reward": metrics["mean_sum_reward"]}
 
 
 # ------------------------------------------------------------------------------------------- report
@@ -432,7 +482,7 @@ def gpu_command(suite: Suite) -> str:
 def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[str], cells: dict, budget: Budget,
                  argv: list[str], datasets_info: dict, wall_s: float) -> None:
     full = budget.steps >= FULL_STEPS and budget.batch_size >= FULL_BATCH
-    cfg = json.loads((REPO_ROOT / "train_configs" / suite.config).read_text())
+    cfg = load_config(suite, budget)
     ema = budget.ema_cutoff if budget.ema_cutoff is not None else cfg["policy"]["ema_cutoff"]
     budget_line = (f"**Budget: {budget.steps} training steps at batch {budget.batch_size} on `{budget.device}`** "
                    f"({'the paper budget' if full else f'the paper trains {FULL_STEPS} steps at batch {FULL_BATCH}'}), "
@@ -453,7 +503,7 @@ def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[st
         "",
         budget_line,
         "",
-        f"Hyper-parameters: `train_configs/{suite.config}` (one fixed set for every agent and dataset, as in the "
+        f"Hyper-parameters: `train_configs/{config_name(suite, budget)}`, training seed {budget.seed} (one fixed set for every agent and dataset, as in the "
         f"paper), with `--policy.type` / `--policy.use_rl` per agent"
         + (" and the budget overrides above." if not full else "."),
         "",
@@ -506,7 +556,7 @@ def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[st
     out.write_text("\n".join(md))
     payload = {
         "suite": suite.name, "argv": argv, "budget": asdict(budget), "wall_s": wall_s,
-        "config": f"train_configs/{suite.config}", "paper_source": suite.paper_source, "gpu_command": gpu_command(suite),
+        "config": f"train_configs/{config_name(suite, budget)}", "paper_source": suite.paper_source, "gpu_command": gpu_command(suite),
         "datasets": datasets_info, "variants": variants,
         "cells": [cells[(v, d)] for v in variants for d in datasets if (v, d) in cells],
     }
@@ -529,6 +579,11 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--ema-cutoff", type=float, default=None,
                     help="default: the config's, or steps/10 when shorter (short budgets)")
     ap.add_argument("--jobs", type=int, default=1, help="cells trained/evaluated in parallel")
+    ap.add_argument("--config", default=None,
+                    help="train config under train_configs/ (default: the suite's paper-size config)")
+    ap.add_argument("--seed", type=int, default=1000, help="training seed (lerobot-train --seed)")
+    ap.add_argument("--curve-points", type=int, default=1,
+                    help="evaluate this many checkpoints, every steps/N (learning curve); 1 = the last only")
     ap.add_argument("--cached-only", action="store_true",
                     help="run nothing: report the finished cells of this budget (e.g. from several invocations)")
     ap.add_argument("--out", type=Path, default=None, help="markdown report (JSON next to it)")
@@ -552,20 +607,31 @@ def resolve_budget(args, suite: Suite) -> Budget:
     if steps < 1 or batch < 1 or episodes < 1 or args.jobs < 1 or args.eval_batch_size < 1:
         raise ValueError(f"--steps, --batch-size, --eval-episodes, --eval-batch-size and --jobs must be >= 1, got "
                          f"{steps}, {batch}, {episodes}, {args.eval_batch_size}, {args.jobs}")
+    if not 1 <= args.curve_points <= steps:
+        raise ValueError(f"--curve-points must be in 1..--steps ({steps}), got {args.curve_points}")
+    if args.config is not None and not (REPO_ROOT / "train_configs" / args.config).is_file():
+        raise ValueError(f"--config {args.config!r}: no such file under train_configs/")
     if episodes % suite.num_tasks:
         raise ValueError(f"--eval-episodes={episodes} must be a multiple of {suite.num_tasks} for suite {suite.name!r} "
                          f"(every evaluation task equally often)")
     ema = args.ema_cutoff
     if ema is None:
-        paper_ema = json.loads((REPO_ROOT / "train_configs" / suite.config).read_text())["policy"]["ema_cutoff"]
+        paper_ema = json.loads((REPO_ROOT / "train_configs" / (args.config or suite.config)).read_text())["policy"]["ema_cutoff"]
         ema = None if steps / 10 >= paper_ema else steps / 10
     return Budget(device=args.device, steps=steps, batch_size=batch, eval_episodes=episodes,
                   eval_batch_size=min(args.eval_batch_size, episodes), eval_async=args.eval_async, ema_cutoff=ema,
-                  num_workers=None if gpu else 0, train_args=list(args.train_arg), eval_args=list(args.eval_arg))
+                  num_workers=None if gpu else 0, train_args=list(args.train_arg), eval_args=list(args.eval_arg),
+                  config=args.config, seed=args.seed, curve_points=args.curve_points)
 
 
 def budget_tag(budget: Budget) -> str:
-    return f"{budget.device}-s{budget.steps}-b{budget.batch_size}"
+    """Names the run directory and the default report: a config, seed or curve of its own never mixes."""
+    tag = f"{budget.device}-s{budget.steps}-b{budget.batch_size}"
+    if budget.config:
+        tag += "-" + Path(budget.config).stem
+    if budget.seed != 1000:
+        tag += f"-seed{budget.seed}"
+    return tag + (f"-c{budget.curve_points}" if budget.curve_points > 1 else "")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -80,7 +80,7 @@ def test_results_table_sets_ours_next_to_paper():
 
 def budget_args(**kw):
     base = dict(device="cpu", steps=None, batch_size=None, eval_episodes=None, eval_batch_size=10, eval_async=False,
-                ema_cutoff=None, jobs=1, train_arg=[], eval_arg=[])
+                ema_cutoff=None, jobs=1, train_arg=[], eval_arg=[], config=None, seed=1000, curve_points=1)
     return argparse.Namespace(**{**base, **kw})
 
 
@@ -92,6 +92,23 @@ def test_budgets_state_cpu_defaults_and_check_episodes():
     assert (gpu.steps, gpu.batch_size, gpu.eval_episodes, gpu.ema_cutoff) == (200_000, 128, 60, None)
     with pytest.raises(ValueError, match="multiple of 10"):
         pe.resolve_budget(budget_args(eval_episodes=15), pe.SUITES["planar_push"])
+
+
+def test_budget_config_seed_and_curve_name_the_runs():
+    suite = pe.SUITES["planar_push"]
+    budget = pe.resolve_budget(budget_args(steps=12000, batch_size=128, config="planar_push_efm_cpu.json", seed=3,
+                                           curve_points=4), suite)
+    assert pe.budget_tag(budget) == "cpu-s12000-b128-planar_push_efm_cpu-seed3-c4"
+    assert pe.budget_tag(pe.resolve_budget(budget_args(), suite)) == "cpu-s2000-b64"  # earlier reports' names
+    assert [pe.curve_step(budget, k) for k in range(1, 5)] == [3000, 6000, 9000, 12000]
+    cmd = pe.train_command(suite, "pc_rl", Path("data"), "local/x", Path("out"), budget)
+    assert any(a.endswith("train_configs/planar_push_efm_cpu.json") for a in cmd)
+    assert "--seed=3" in cmd and "--save_freq=3000" in cmd and "--policy.type=efm_pc" in cmd
+    assert budget.ema_cutoff is None  # 12000 / 10 >= the config's 1000: its own cutoff
+    with pytest.raises(ValueError, match="no such file"):
+        pe.resolve_budget(budget_args(config="nope.json"), suite)
+    with pytest.raises(ValueError, match="--curve-points"):
+        pe.resolve_budget(budget_args(curve_points=0), suite)
 
 
 @pytest.mark.parametrize("config, expected", [
@@ -117,7 +134,7 @@ def test_tiny_end_to_end_run_and_resume(tmp_path):
     out = tmp_path / "report.md"
     argv = ["--suite", "ogbench", "--datasets", "pointmaze-large-navigate-v0", "--variants", "gc", "ac_rl",
             "--steps", "20", "--batch-size", "16", "--eval-episodes", "5", "--eval-batch-size", "5",
-            "--ogbench-episodes", "10", "--ogbench-episode-steps", "101", "--jobs", "2",
+            "--ogbench-episodes", "10", "--ogbench-episode-steps", "101", "--jobs", "2", "--curve-points", "2",
             "--work-dir", str(tmp_path / "work"), "--data-root", str(tmp_path / "data"), "--out", str(out),
             *[f"--train-arg={a}" for a in TINY_TRAIN], "--eval-arg=--env.episode_length=60"]
     assert pe.main(argv) == 0
@@ -139,6 +156,9 @@ def test_tiny_end_to_end_run_and_resume(tmp_path):
         ckpt = json.loads(next((tmp_path / "work").glob(f"ogbench/*/*/{v}/train/checkpoints/last/pretrained_model/config.json")).read_text())
         assert (ckpt["type"], ckpt["use_rl"], ckpt["obs_traj_stride"], ckpt["action_mode"]) == (policy_type, rl == "true", 16, "velocity")
         assert saved["pc_success"] == cell["pc_success"]
+        # the learning curve: the step-10 checkpoint evaluated too, the last point is the cell's result
+        assert [p["step"] for p in cell["curve"]] == [10, 20] and cell["curve"][-1]["pc_success"] == cell["pc_success"]
+        assert 0 < cell["curve"][0]["train_min"] < cell["curve"][1]["train_min"] and cell["steps_per_s"] > 0
     md = out.read_text()
     assert "**Budget: 20 training steps at batch 16 on `cpu`**" in md
     assert "| FM-GC | " in md and "| 66 |" in md and "| 89 |" in md  # the paper's numbers next to ours
