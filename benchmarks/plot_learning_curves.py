@@ -1,0 +1,86 @@
+#!/usr/bin/env python
+"""Learning curves of paper-runner cells: success (%) against training steps and against training minutes.
+
+Reads the JSON reports of ``benchmarks/paper_experiments.py`` runs made with ``--curve-points N`` (each cell
+holds ``curve``: one point per evaluated checkpoint) and draws one line per (dataset, agent, seed); cells of
+several reports (seeds, configs) go on the same axes, one panel per dataset.
+
+    .venv/bin/python benchmarks/plot_learning_curves.py benchmarks/results/planar_push_cpu_*.json \
+        --out benchmarks/results/planar_push_cpu_curves.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def load_cells(reports: list[Path]) -> list[dict]:
+    """Every cell with a learning curve, tagged with its report's config and seed."""
+    cells = []
+    for path in reports:
+        payload = json.loads(path.read_text())
+        budget = payload.get("budget", {})
+        for cell in payload.get("cells", []):
+            if cell.get("curve"):
+                config = Path(cell.get("config") or payload.get("config", "")).stem
+                cells.append({**cell, "seed": cell.get("seed", budget.get("seed")), "config_name": config})
+    if not cells:
+        raise ValueError(f"No cell with a learning curve in {[str(p) for p in reports]}; run the paper runner "
+                         "with --curve-points N (N > 1)")
+    return cells
+
+
+def label(cell: dict, several_configs: bool) -> str:
+    text = f"{cell['agent']} (seed {cell['seed']})"
+    return f"{text} [{cell['config_name']}]" if several_configs else text
+
+
+def plot(cells: list[dict], out: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    datasets = sorted({c["dataset"] for c in cells})
+    several_configs = len({c["config_name"] for c in cells}) > 1
+    agents = sorted({label(c, several_configs).split(" (")[0] for c in cells})
+    colours = {a: plt.cm.tab10(i % 10) for i, a in enumerate(agents)}
+    fig, axes = plt.subplots(2, len(datasets), figsize=(5.2 * len(datasets), 7.5), squeeze=False)
+    for col, dataset in enumerate(datasets):
+        for cell in sorted((c for c in cells if c["dataset"] == dataset), key=lambda c: (c["agent"], c["seed"])):
+            name = label(cell, several_configs)
+            style = "--" if several_configs and "cpu" not in cell["config_name"] else "-"
+            colour = colours[name.split(" (")[0]]
+            success = [p["pc_success"] for p in cell["curve"]]
+            axes[0, col].plot([p["step"] for p in cell["curve"]], success, style, marker="o", color=colour, label=name)
+            minutes = [p["train_min"] for p in cell["curve"]]
+            if all(m is not None for m in minutes):
+                axes[1, col].plot(minutes, success, style, marker="o", color=colour, label=name)
+        axes[0, col].set_title(f"{title}: {dataset}")
+        axes[0, col].set_xlabel("training steps")
+        axes[1, col].set_xlabel("training minutes (one CPU core)")
+        for row in range(2):
+            axes[row, col].set_ylabel("success (%)")
+            axes[row, col].set_ylim(-3, 103)
+            axes[row, col].grid(alpha=0.3)
+        axes[0, col].legend(fontsize=7)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("reports", nargs="+", type=Path, help="JSON reports of benchmarks/paper_experiments.py")
+    ap.add_argument("--out", type=Path, required=True, help="PNG file")
+    ap.add_argument("--title", default="planar push")
+    args = ap.parse_args(argv)
+    plot(load_cells(args.reports), args.out, args.title)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
