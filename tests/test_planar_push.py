@@ -180,6 +180,18 @@ def test_play_pauses_hold_still(env):
     assert (runs >= 15).sum() >= 2, runs
 
 
+@pytest.mark.parametrize("cls, length", [(PlayFullSpace, 800), (PlayPartitioned, 630)])
+def test_play_pushes_the_disc_into_corners(env, cls, length):
+    """Play stops the disc on walls and in corners, where 8 of the 10 evaluation goals lie: without such legs
+    no play frame is within the success tolerance of those goals."""
+    op = cls(env, np.random.default_rng(1))
+    states = np.concatenate([run_episode(env, op, length)[0] for _ in range(3)])
+    goals = np.array([g[2:] for _, _, g in EVAL_PAIRS])
+    near = np.linalg.norm(states[:, None, 2:] - goals[None], axis=-1) < SUCCESS_TOL  # (T, 10)
+    assert near[:, [0, 1, 2, 3, 4, 5, 7, 8]].any(axis=0).sum() >= 1, "no frame has the disc on a corner goal"
+    assert near.any(axis=1).sum() >= 30  # and it rests there for a while
+
+
 @pytest.mark.parametrize("region", [0, 1, 2])
 def test_partitioned_stays_in_region(env, region):
     op = PlayPartitioned(env, np.random.default_rng(region), region=region)

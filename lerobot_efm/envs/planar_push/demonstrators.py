@@ -45,6 +45,10 @@ START_MARGIN = 0.16  # random disc starts/targets: room for the effector between
 EXPERT_REST = (40, 140)  # frames held at the goal at the end of an expert episode (median 90)
 PLAY_REST = (20, 100)  # frames of a play pause (after a disc leg with probability PLAY_REST_AFTER_DISC)
 PLAY_REST_AFTER_DISC = 0.5
+# Humans push the disc against walls and into corners too (nothing stops it there); without such legs no
+# play frame has the disc within 0.04 of 8 of the 10 evaluation goals (corners), which no agent can then reach.
+PLAY_WALL_TARGETS = 0.35  # share of disc legs aimed at a wall-adjacent spot (half of them a corner), stopped on
+WALL_BAND = 0.06  # a wall-adjacent target's disc lies within this of its closest allowed distance to a wall
 REST_NOISE = 0.002  # a resting hand's tremor on the command
 
 
@@ -78,6 +82,23 @@ class Pusher:
         idx = np.argwhere(self.start_free)
         i, j = idx[rng.integers(len(idx))]
         return grid_point(i, j) + rng.uniform(-0.02, 0.02, 2)
+
+    def sample_wall_disc(self, rng: np.random.Generator) -> np.ndarray:
+        """A disc target against a wall: half of the time a maze corner of the region, else any free spot within
+        WALL_BAND of the walls."""
+        corners = [c for c in CORNERS if self.obj_free[nearest_free(self.obj_free, c)]
+                   and np.linalg.norm(grid_point(*nearest_free(self.obj_free, c)) - c) < GRID_COORDS[1] - GRID_COORDS[0]]
+        if corners and rng.random() < 0.5:
+            return corners[rng.integers(len(corners))].copy()
+        idx = np.argwhere(self.obj_free & (self._wall_gap() < WALL_BAND))
+        i, j = idx[rng.integers(len(idx))]
+        return grid_point(i, j)
+
+    def _wall_gap(self) -> np.ndarray:
+        if not hasattr(self, "_gap"):
+            pts = np.stack(np.meshgrid(GRID_COORDS, GRID_COORDS, indexing="ij"), -1)
+            self._gap = wall_distance(pts) - (OBJECT_RADIUS + OBJECT_CLEARANCE)
+        return self._gap
 
     def sample_effector(self, rng: np.random.Generator, obj: np.ndarray, near: float | None = None) -> np.ndarray:
         """A free effector position clear of the disc (within ``near`` of it if given)."""
@@ -248,6 +269,10 @@ class PlayFullSpace:
             self._queue = [self._pause()]
         elif r < 0.3:
             self._queue = [("effector", self._random_effector_point(s[2:]))]
+        elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall or into a corner, stopping there
+            self._queue = [("disc_stop", self.pusher.sample_wall_disc(self.rng))]
+            if self.rng.random() < PLAY_REST_AFTER_DISC:
+                self._queue.append(self._pause())
         else:
             target = self.pusher.sample_disc(self.rng)
             self._queue = [("disc", target)]
@@ -276,13 +301,14 @@ class PlayFullSpace:
                 if np.isnan(target[1]):
                     target[1:] = eff
                 return _clip(target[1:] + self.rng.normal(0.0, REST_NOISE, 2))  # a resting hand: no leg noise
-            reached = (np.linalg.norm(obj - target) < 0.08) if kind == "disc" else (np.linalg.norm(eff - target) < 0.04)
+            reach_tol = {"disc": 0.08, "disc_stop": 0.025}.get(kind)
+            reached = np.linalg.norm((obj if reach_tol else eff) - target) < (reach_tol or 0.04)
             if reached or self._budget <= 0:
                 self._queue.pop(0)
                 self._budget = self.leg_budget
                 continue
-            if kind == "disc":
-                cmd = self.pusher.push(s, target, final=False, lead=self._lead)
+            if kind in ("disc", "disc_stop"):
+                cmd = self.pusher.push(s, target, final=kind == "disc_stop", lead=self._lead)
             else:
                 cmd = self.pusher.move_effector(eff, obj, target)
             break
