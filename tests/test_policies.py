@@ -31,7 +31,9 @@ def inference_inputs(batch, n=2):
 
 @pytest.mark.parametrize("policy_type,use_rl", VARIANTS)
 def test_forward_backward_update_and_act(state_dataset, policy_type, use_rl):
-    policy, _, post, batch = build(state_dataset, policy_type, use_rl=use_rl)
+    # An MLP state encoder, so that the encoder has weights whose gradients can be checked (the default
+    # identity encoder has none).
+    policy, _, post, batch = build(state_dataset, policy_type, use_rl=use_rl, state_encoder="mlp", state_latent_dim=8)
     loss, info = policy.forward(batch)
     assert loss.dim() == 0 and math.isfinite(loss.item())
     components = {"efm_gc": {"actor"}, "efm_ac": {"critic", "actor"}, "efm_pc": {"critic", "planner", "actor"},
@@ -40,7 +42,8 @@ def test_forward_backward_update_and_act(state_dataset, policy_type, use_rl):
     # rows = batch + reached (+ bootstrap rows with use_rl)
     assert info["rows"] == 6 + 4 + (6 if use_rl else 0)
     loss.backward()
-    assert all(p.grad is not None for p in policy.model.encoder.parameters())
+    encoder_params = list(policy.model.encoder.parameters())
+    assert encoder_params and all(p.grad is not None and p.grad.abs().sum() > 0 for p in encoder_params)
     before = [p.clone() for p in policy.ema_model.parameters()]
     with torch.no_grad():
         for p in policy.model.parameters():
@@ -86,23 +89,41 @@ def test_rejection_sampling_picks_each_rows_best_candidate(state_dataset, policy
     chunk = policy.predict_action_chunk(obs)
     pred = policy.last_prediction
     scores, index = pred["candidate_distances"], pred["chosen_candidate"]
-    assert scores.shape == (4, 7) and torch.equal(index, scores.argmin(1))
+    assert scores.shape == (4, 7)
+    goals = obs["observation.goal.state"]  # identity encoder: the goal latent is the normalised goal state
+    critic = policy.ema_model.critic_distance
+
+    def score(last_obs, row):  # one candidate against its own row's goal, outside the batched code path
+        return critic(last_obs[None], goals[row][None])[0]
+
     if policy_type == "efm_as":
-        expected = pred["candidate_actions"][torch.arange(4), index]
-        assert torch.equal(chunk, expected)
+        assert torch.equal(chunk, pred["candidate_actions"][torch.arange(4), index])
+        for b in range(4):  # the chosen future, scored against row b's goal, is row b's best score
+            assert torch.allclose(score(pred["obs_plan"][b, -1], b), scores[b].min(), atol=1e-5)
+            assert scores[b, index[b]] == scores[b].min()
     else:
-        assert torch.equal(pred["obs_plan"], pred["candidate_obs_plans"][torch.arange(4), index])
+        plans = pred["candidate_obs_plans"]
+        independent = torch.stack([torch.stack([score(plans[b, j, -1], b) for j in range(7)]) for b in range(4)])
+        assert torch.allclose(scores, independent, atol=1e-5)
+        assert torch.equal(index, independent.argmin(1))
+        assert torch.equal(pred["obs_plan"], plans[torch.arange(4), index])
 
 
 @pytest.mark.parametrize("policy_type", EFM_TYPES)
 def test_save_load_round_trip(state_dataset, tmp_path, policy_type):
     policy, _, _, batch = build(state_dataset, policy_type)
+    with torch.no_grad():  # online and EMA weights must differ, or a swap or re-sync on load is invisible
+        for p in policy.model.parameters():
+            p.add_(0.1 * torch.randn_like(p))
     policy.update()
     policy.save_pretrained(tmp_path)
     loaded = get_policy_class(policy_type).from_pretrained(tmp_path)
     assert loaded.config.type == policy_type
-    for (name, a), b in zip(policy.state_dict().items(), loaded.state_dict().values(), strict=True):
-        assert torch.equal(a, b), name
+    saved, restored = policy.state_dict(), loaded.state_dict()
+    assert saved.keys() == restored.keys()
+    for name, value in saved.items():
+        assert torch.equal(value, restored[name]), name
+    assert any(not torch.equal(restored["model." + n], restored["ema_model." + n]) for n, _ in loaded.model.named_parameters())
     obs = inference_inputs(batch)
     policy.eval()
     torch.manual_seed(3)
