@@ -473,6 +473,24 @@ def per_task_table(suite: Suite, variants: list[str], datasets: list[str], cells
     return "\n".join(lines)
 
 
+def curve_table(suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]) -> str:
+    """One row per cell with a learning curve: success (training minutes) per checkpoint, and the step rate."""
+    rows = []
+    for d in datasets:
+        for v in variants:
+            cell = cells.get((v, d)) or {}
+            curve = cell.get("curve") or []
+            if len(curve) < 2:
+                continue
+            if not rows:
+                rows = ["| dataset | agent | " + " | ".join(f"step {p['step']}" for p in curve) + " | steps/s |",
+                        "|---|---|" + "---:|" * (len(curve) + 1)]
+            points = " | ".join(f"{p['pc_success']:.0f} ({p['train_min']:.0f} min)" if p.get("train_min") is not None
+                                else f"{p['pc_success']:.0f}" for p in curve)
+            rows.append(f"| {suite.dataset_columns[d]} | {VARIANTS[v][2]} | {points} | {cell.get('steps_per_s') or '–'} |")
+    return "\n".join(rows)
+
+
 def gpu_command(suite: Suite) -> str:
     return (f".venv/bin/python benchmarks/paper_experiments.py --suite {suite.name} --variants all --datasets all "
             f"--device cuda --steps {FULL_STEPS} --batch-size {FULL_BATCH} --eval-episodes {suite.full_eval_episodes} "
@@ -531,6 +549,11 @@ def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[st
             ref = getattr(importlib.import_module(module), func)()
             md += [f"Reference, measured now: {suite.reference_name}, same protocol: {ref['pc_success']:.0f} % "
                    f"success, {ref['pc_closed']:.0f} % closed.", ""]
+    curves_md = curve_table(suite, variants, datasets, cells)
+    if curves_md:
+        md += ["## Learning curves: success % (training minutes) at each evaluated checkpoint", "",
+               "Minutes of training on one CPU core up to the checkpoint (the run's mean step rate); plots: "
+               "`benchmarks/plot_learning_curves.py`.", "", curves_md, ""]
     tasks_md = per_task_table(suite, variants, datasets, cells)
     if tasks_md:
         md += ["## Success per evaluation task (%)", "", tasks_md]

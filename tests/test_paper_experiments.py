@@ -111,6 +111,15 @@ def test_budget_config_seed_and_curve_name_the_runs():
         pe.resolve_budget(budget_args(curve_points=0), suite)
 
 
+def test_curve_table_lists_each_checkpoint_with_its_minutes():
+    suite = pe.SUITES["planar_push"]
+    curve = [{"step": 6000, "train_min": 15.2, "pc_success": 46.0}, {"step": 12000, "train_min": 30.4, "pc_success": 64.0}]
+    cells = {("ac", "expert"): {"curve": curve, "steps_per_s": 6.75}, ("gc", "expert"): {"curve": curve[-1:]}}
+    lines = pe.curve_table(suite, ["gc", "ac"], ["expert"], cells).splitlines()
+    assert lines[0] == "| dataset | agent | step 6000 | step 12000 | steps/s |"
+    assert lines[2:] == ["| Expert | FM-AC no-RL | 46 (15 min) | 64 (30 min) | 6.75 |"]  # single points: no curve
+
+
 @pytest.mark.parametrize("config, expected", [
     ("ogbench_pointmaze_efm.json", dict(obs_traj_len=4, obs_traj_stride=16, action_traj_len=8, action_traj_stride=1,
                                         max_goal_distance=200, action_mode="velocity", ema_cutoff=5000)),

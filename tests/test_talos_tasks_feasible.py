@@ -92,3 +92,14 @@ def test_short_task_feasible(env, name):
 def test_chain_close_door_pull_tray_feasible(env):
     info, n = run_task(env, "close_door_pull_tray")
     assert info["is_success"], info
+
+
+FAST_TASKS = {"open_door", "close_door", "pull_tray", "pot_to_tray", "close_door_pull_tray"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(set(tasks.TASK_NAMES) - FAST_TASKS))
+def test_remaining_task_feasible(env, name):
+    """The other task plans, the long ``store_pot`` among them (4-16 s each): ``make test-slow``, run by CI."""
+    info, n = run_task(env, name)
+    assert info["is_success"], (name, info)
