@@ -3,7 +3,7 @@ PY := .venv/bin/python
 export HF_HUB_OFFLINE := 1
 export MUJOCO_GL := egl
 
-.PHONY: demo test test-slow bench
+.PHONY: demo test test-fast test-slow bench
 
 .venv/.installed: pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -11,7 +11,11 @@ export MUJOCO_GL := egl
 demo: .venv/.installed
 	$(PY) -m lerobot_efm.demo
 
+# Everything, the slow tests too (two-process training, the long Talos task plans): what CI runs.
 test: .venv/.installed
+	$(PY) -m pytest -q -m "slow or not slow"
+
+test-fast: .venv/.installed
 	$(PY) -m pytest -q
 
 test-slow: .venv/.installed
