@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """CPU benchmark of the five EFM agents (training steps/s and single-observation inference latency),
 compared with the measured speed of the authors' reference implementation on a 2-core CPU
-(/work/shared/docs/reference-implementation.md, last section).
+(../shared/docs/reference-implementation.md, last section).
 
 Two configurations, with the policies' DEFAULT network sizes (the reference's architecture):
 
@@ -60,7 +60,7 @@ from lerobot_efm.configuration_efm import (  # noqa: E402
 
 AGENT_TYPES = ["efm_gc", "efm_ac", "efm_pc", "efm_ps", "efm_as"]
 PAPER_NAMES = {"efm_gc": "FM-GC", "efm_ac": "FM-AC", "efm_pc": "FM-PC", "efm_ps": "FM-PS", "efm_as": "FM-AS"}
-REFERENCE_DOC = "/work/shared/docs/reference-implementation.md"
+REFERENCE_DOC = "../shared/docs/reference-implementation.md"
 CONTENDED = " †"
 CONTENTION_THRESHOLD = 0.8
 

@@ -53,7 +53,7 @@ def run_one(label: str, checkpoint: str, task: str, args, root: Path) -> dict:
     print(f"{label:>8} {task:<22} {info['overall']['pc_success']:5.1f}% ({seconds:.0f} s)", flush=True)
     return {"label": label, "task": task, "pc_success": info["overall"]["pc_success"],
             "n_episodes": info["overall"]["n_episodes"], "seconds": seconds,
-            "successes": successes, "command": " ".join(cmd)}
+            "successes": successes, "command": " ".join([os.path.relpath(cmd[0]), *cmd[1:]])}  # no machine path
 
 
 def table(results: list[dict], labels: list[str]) -> str:

@@ -137,6 +137,7 @@ class TrainingRows:
 
     goal_conditioned: Rows
     goal_free: Rows
+    num_bootstrap: int = 0  # eq. (5) rows at the end of goal_conditioned
 
 
 # --------------------------------------------------------------------------------------------------
@@ -245,7 +246,7 @@ class EFMAgent(nn.Module, abc.ABC):
             head = {k: v[:n_rl] for k, v in batch.items() if k.startswith((GOAL_PREFIX, RL_GOAL_PREFIX))}
             rows = rows.cat(self.bootstrap_rows(head, target, l_obs[:n_rl], latents[2][:n_rl], distance[:n_rl],
                                                 actions[:n_rl], None if obs_traj is None else obs_traj[:n_rl]))
-        return TrainingRows(rows, goal_free)
+        return TrainingRows(rows, goal_free, n_rl)
 
     @torch.no_grad()
     def bootstrap_rows(self, batch, target: EFMAgent, l_obs, l_rl_goal, distance, actions, obs_traj) -> Rows:
@@ -270,7 +271,7 @@ class EFMAgent(nn.Module, abc.ABC):
         total = sum(self.config.critic_loss_weight * v if k == "critic" else v for k, v in losses.items())
         info = {f"loss_{k}": v.item() for k, v in losses.items()}
         info["rows"] = float(rows.goal_conditioned.obs.shape[0])
-        n_rl = self.num_bootstrap_rows(batch["action"].shape[0], step)
+        n_rl = rows.num_bootstrap
         if self.config.use_rl:
             info["rl_rows"] = float(n_rl)
         if n_rl:

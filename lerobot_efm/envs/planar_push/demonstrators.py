@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .maze import (
-    ARENA, EFFECTOR_CLEARANCE, EFFECTOR_RADIUS, GRID_COORDS, MAZE_CELLS, OBJECT_CLEARANCE, OBJECT_RADIUS,
+    ARENA, EFFECTOR_CLEARANCE, EFFECTOR_RADIUS, GRID_COORDS, GRID_H, MAZE_CELLS, OBJECT_CLEARANCE, OBJECT_RADIUS,
     REGION_NAMES, distance_field, free_disc_cells, free_mask, grid_index, grid_path, grid_point, inside_region,
     lookahead, maze_cell_of, nearest_free, segment_clear, wall_distance,
 )
@@ -74,6 +74,10 @@ class Pusher:
         self.obj_free = free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE, region, region_margin)
         self.start_free = free_mask(OBJECT_RADIUS + START_MARGIN, region, region_margin + 0.04)
         self.eff_free = free_mask(EFFECTOR_RADIUS + 0.01)
+        # wall-adjacent disc targets: free for the disc, but not WALL_BAND further from the walls
+        self.wall_nodes = np.argwhere(self.obj_free & ~free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE + WALL_BAND))
+        self.corners = [c for c in CORNERS  # the maze corners a disc of this region can stop in
+                        if np.linalg.norm(grid_point(*nearest_free(self.obj_free, c)) - c) < GRID_H]
         self._obj_fields: dict[tuple[int, int], np.ndarray] = {}
         self._eff_plan: tuple | None = None
 
@@ -86,19 +90,10 @@ class Pusher:
     def sample_wall_disc(self, rng: np.random.Generator) -> np.ndarray:
         """A disc target against a wall: half of the time a maze corner of the region, else any free spot within
         WALL_BAND of the walls."""
-        corners = [c for c in CORNERS if self.obj_free[nearest_free(self.obj_free, c)]
-                   and np.linalg.norm(grid_point(*nearest_free(self.obj_free, c)) - c) < GRID_COORDS[1] - GRID_COORDS[0]]
-        if corners and rng.random() < 0.5:
-            return corners[rng.integers(len(corners))].copy()
-        idx = np.argwhere(self.obj_free & (self._wall_gap() < WALL_BAND))
-        i, j = idx[rng.integers(len(idx))]
+        if self.corners and rng.random() < 0.5:
+            return self.corners[rng.integers(len(self.corners))].copy()
+        i, j = self.wall_nodes[rng.integers(len(self.wall_nodes))]
         return grid_point(i, j)
-
-    def _wall_gap(self) -> np.ndarray:
-        if not hasattr(self, "_gap"):
-            pts = np.stack(np.meshgrid(GRID_COORDS, GRID_COORDS, indexing="ij"), -1)
-            self._gap = wall_distance(pts) - (OBJECT_RADIUS + OBJECT_CLEARANCE)
-        return self._gap
 
     def sample_effector(self, rng: np.random.Generator, obj: np.ndarray, near: float | None = None) -> np.ndarray:
         """A free effector position clear of the disc (within ``near`` of it if given)."""
