@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import time
 from contextlib import closing
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -47,9 +48,19 @@ PLAY_REST = (20, 100)  # frames of a play pause (after a disc leg with probabili
 PLAY_REST_AFTER_DISC = 0.5
 # Humans push the disc against walls and into corners too (nothing stops it there); without such legs no
 # play frame has the disc within 0.04 of 8 of the 10 evaluation goals (corners), which no agent can then reach.
-PLAY_WALL_TARGETS = 0.35  # share of disc legs aimed at a wall-adjacent spot (half of them a corner), stopped on
+PLAY_WALL_TARGETS = 0.5  # share of disc legs aimed at a wall-adjacent spot (half of them a corner), stopped on
 WALL_BAND = 0.06  # a wall-adjacent target's disc lies within this of its closest allowed distance to a wall
 REST_NOISE = 0.002  # a resting hand's tremor on the command
+# A human's region is a dashed line on the screen, and "keep the disc in the region" lets the disc touch the line:
+# its centre crosses it by up to a radius. Neighbouring regions' episodes then share the states near their border,
+# the only places where the eq. 5 backup can join them; with disc paths kept 0.06 inside their regions (as before),
+# no disc position of one region came within 0.15 of another region's.
+REGION_OVERLAP = OBJECT_RADIUS
+# Humans slide a disc into a corner along one of its walls; a straight diagonal push leaves the hand on the
+# diagonal, where no evaluation goal has it (the goals are last frames of human pushes: the hand behind the disc
+# along a wall). Corner legs first bring the disc onto a wall's line this far from the corner.
+CORNER_SLIDE = 0.35
+VIA_TOL = 0.02  # the disc stops this close to such a via point, lined up for the slide
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -69,7 +80,7 @@ class Pusher:
     ``region`` confines disc paths (and targets sampled by :meth:`sample_disc`) to one maze region.
     """
 
-    def __init__(self, region: int | None = None, region_margin: float = 0.06):
+    def __init__(self, region: int | None = None, region_margin: float = -REGION_OVERLAP):
         self.region = region
         self.obj_free = free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE, region, region_margin)
         self.start_free = free_mask(OBJECT_RADIUS + START_MARGIN, region, region_margin + 0.04)
@@ -94,6 +105,15 @@ class Pusher:
             return self.corners[rng.integers(len(self.corners))].copy()
         i, j = self.wall_nodes[rng.integers(len(self.wall_nodes))]
         return grid_point(i, j)
+
+    def corner_via(self, corner: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
+        """A point CORNER_SLIDE from ``corner`` along one of its two walls (random, among those the disc may
+        use), from which a straight push slides the disc along the wall into the corner; None if neither."""
+        inward = -np.sign(corner)
+        vias = [corner + inward * axis * CORNER_SLIDE for axis in (np.array([1.0, 0.0]), np.array([0.0, 1.0]))]
+        vias = [v for v in vias if self.obj_free[grid_index(v)]
+                and segment_clear(v, corner, OBJECT_RADIUS + 0.005)]
+        return vias[rng.integers(len(vias))].copy() if vias else None
 
     def sample_effector(self, rng: np.random.Generator, obj: np.ndarray, near: float | None = None) -> np.ndarray:
         """A free effector position clear of the disc (within ``near`` of it if given)."""
@@ -151,10 +171,12 @@ class Pusher:
             return eff + _unit(eff - obj) * 0.1
         return lookahead(path, eff, EFFECTOR_RADIUS + 0.005, 0.4, obj, AVOID)
 
-    def push(self, state: np.ndarray, target: np.ndarray, final: bool, lead: float = MAX_LEAD) -> np.ndarray:
-        """Command that moves the disc toward ``target`` (stopping on it when ``final``)."""
+    def push(self, state: np.ndarray, target: np.ndarray, final: bool, lead: float = MAX_LEAD,
+             direction: np.ndarray | None = None) -> np.ndarray:
+        """Command that moves the disc toward ``target`` (stopping on it when ``final``); a given ``direction``
+        is pushed along as it is (a straight slide, e.g. along a wall)."""
         eff, obj = state[:2], state[2:]
-        u, direct = self._push_direction(obj, target)
+        u, direct = (direction, True) if direction is not None else self._push_direction(obj, target)
         to_obj = obj - eff
         dist = float(np.linalg.norm(to_obj))
         if dist < PUSH_GAP + 0.06 and float(np.dot(to_obj / max(dist, 1e-9), u)) > ALIGN_COS:
@@ -226,6 +248,20 @@ class ExpertReachGoal:
         return self._done
 
 
+@dataclass
+class Leg:
+    """One step of a play plan. ``kind``: "disc" (push the disc near ``target``), "disc_via" (push it onto
+    ``target``, lining it up for the next leg), "disc_stop" (push it onto ``target`` and stop there), "effector" (move the
+    hand alone) or "pause" (hold the hand where it is for ``frames``; ``target`` is set when the pause starts).
+    A ``slide`` pushes along the straight line from where the disc is when the leg starts (``direction``)."""
+
+    kind: str
+    target: np.ndarray | None = None
+    frames: int = 0
+    slide: bool = False
+    direction: np.ndarray | None = None
+
+
 class PlayFullSpace:
     """Goal-free play: push the disc to random targets (sometimes via a detour), move the effector alone,
     pause; mild command noise. Never done (episodes end at the recorder's length)."""
@@ -235,7 +271,7 @@ class PlayFullSpace:
     def __init__(self, env, rng: np.random.Generator, noise: float = 0.01, leg_budget: int = 250, **_):
         self.env, self.rng, self.noise, self.leg_budget = env, rng, float(noise), int(leg_budget)
         self.pusher = Pusher(self.region)
-        self._queue: list[tuple[str, np.ndarray]] = []
+        self._queue: list[Leg] = []
         self._budget = 0
         self._lead = MAX_LEAD
 
@@ -263,22 +299,25 @@ class PlayFullSpace:
         if r < 0.12:
             self._queue = [self._pause()]
         elif r < 0.3:
-            self._queue = [("effector", self._random_effector_point(s[2:]))]
+            self._queue = [Leg("effector", self._random_effector_point(s[2:]))]
         elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall or into a corner, stopping there
-            self._queue = [("disc_stop", self.pusher.sample_wall_disc(self.rng))]
-            if self.rng.random() < PLAY_REST_AFTER_DISC:
+            target = self.pusher.sample_wall_disc(self.rng)
+            via = self.pusher.corner_via(target, self.rng) if np.abs(target).min() >= CORNER - 1e-9 else None
+            self._queue = [Leg("disc_stop", target, slide=via is not None)]
+            if via is not None:
+                self._queue.insert(0, Leg("disc_via", via))
+            if via is not None or self.rng.random() < PLAY_REST_AFTER_DISC:  # nothing more to push in a corner
                 self._queue.append(self._pause())
         else:
-            target = self.pusher.sample_disc(self.rng)
-            self._queue = [("disc", target)]
+            self._queue = [Leg("disc", self.pusher.sample_disc(self.rng))]
             if self.rng.random() < 0.3:  # detour through another point first
-                self._queue.insert(0, ("disc", self.pusher.sample_disc(self.rng)))
+                self._queue.insert(0, Leg("disc", self.pusher.sample_disc(self.rng)))
             if self.rng.random() < PLAY_REST_AFTER_DISC:  # a human often lets go once the disc is there
                 self._queue.append(self._pause())
 
-    def _pause(self) -> tuple[str, np.ndarray]:
+    def _pause(self) -> Leg:
         """A rest of human-like length; the hand holds where it is when the pause starts."""
-        return "pause", np.array([self.rng.integers(PLAY_REST[0], PLAY_REST[1] + 1), np.nan, np.nan])
+        return Leg("pause", frames=int(self.rng.integers(PLAY_REST[0], PLAY_REST[1] + 1)))
 
     def act(self, obs: dict) -> np.ndarray:
         s = np.asarray(obs["agent_pos"], dtype=np.float64)
@@ -286,26 +325,29 @@ class PlayFullSpace:
         while True:
             if not self._queue:
                 self._new_leg(s)
-            kind, target = self._queue[0]
+            leg = self._queue[0]
             self._budget -= 1
-            if kind == "pause":
-                if target[0] <= 0 or self._budget <= 0:
+            if leg.kind == "pause":
+                if leg.frames <= 0 or self._budget <= 0:
                     self._queue.pop(0)
                     continue
-                target[0] -= 1
-                if np.isnan(target[1]):
-                    target[1:] = eff
-                return _clip(target[1:] + self.rng.normal(0.0, REST_NOISE, 2))  # a resting hand: no leg noise
-            reach_tol = {"disc": 0.08, "disc_stop": 0.025}.get(kind)
-            reached = np.linalg.norm((obj if reach_tol else eff) - target) < (reach_tol or 0.04)
+                leg.frames -= 1
+                if leg.target is None:
+                    leg.target = eff.copy()
+                return _clip(leg.target + self.rng.normal(0.0, REST_NOISE, 2))  # a resting hand: no leg noise
+            reach_tol = {"disc": 0.08, "disc_via": VIA_TOL, "disc_stop": 0.025}.get(leg.kind)
+            reached = np.linalg.norm((obj if reach_tol else eff) - leg.target) < (reach_tol or 0.04)
             if reached or self._budget <= 0:
                 self._queue.pop(0)
                 self._budget = self.leg_budget
                 continue
-            if kind in ("disc", "disc_stop"):
-                cmd = self.pusher.push(s, target, final=kind == "disc_stop", lead=self._lead)
+            if leg.kind == "effector":
+                cmd = self.pusher.move_effector(eff, obj, leg.target)
             else:
-                cmd = self.pusher.move_effector(eff, obj, target)
+                if leg.slide and leg.direction is None:  # the slide's line is fixed where it starts
+                    leg.direction = _unit(leg.target - obj)
+                cmd = self.pusher.push(s, leg.target, final=leg.kind != "disc", lead=self._lead,
+                                       direction=leg.direction)
             break
         return _clip(cmd + self.rng.normal(0.0, self.noise, 2))
 
@@ -316,7 +358,7 @@ class PlayFullSpace:
 
 class PlayPartitioned(PlayFullSpace):
     """Play confined to one region per episode (``region`` kwarg, else random per reset): disc targets and
-    disc paths stay 0.06 inside the region, effector-only moves stay near it."""
+    disc paths stay within REGION_OVERLAP beyond the region's borders, effector-only moves stay near it."""
 
     def __init__(self, env, rng: np.random.Generator, region: int | None = None, **kwargs):
         self.fixed_region = region
