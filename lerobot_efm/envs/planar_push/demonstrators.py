@@ -2,10 +2,11 @@
 
 * :class:`ExpertReachGoal` pushes the disc from a random start along a grid shortest path to a maze corner
   (or, given ``goal``, to any 4-D goal: disc first, then the effector around it; it solves the eval pairs).
-* :class:`PlayFullSpace` pushes the disc to random targets anywhere, with detours, effector-only wandering
-  and pauses; it never finishes.
+* :class:`PlayFullSpace` pushes the disc to random targets anywhere, against walls and (sliding it along a wall)
+  into corners, with detours, effector-only wandering and pauses; it never finishes.
 * :class:`PlayPartitioned` does the same inside one region per episode (``maze.REGION_NAMES``): the disc
-  centre never leaves its region, so reaching a far goal needs pieces of several episodes (stitching).
+  touches the region's border line at most, so reaching a far goal needs pieces of several episodes, joined
+  at the states that neighbouring regions share along their borders (stitching).
 
 All follow the operator protocol of ``lerobot-efm-record``: ``reset() -> obs``, ``act(obs) -> command``,
 ``done``. Pushing is closed-loop: the effector stages behind the disc w.r.t. the next path waypoint (moving
