@@ -10,8 +10,8 @@ from lerobot.envs.factory import make_env
 from lerobot.envs.utils import preprocess_observation
 from lerobot_efm.envs import PlanarPushEnv, PlanarPushEnvConfig
 from lerobot_efm.envs.planar_push.demonstrators import (
-    BEHAVIOURS, CORNER_SLIDE, REGION_OVERLAP, VIA_TOL, ExpertReachGoal, Leg, PlayFullSpace, PlayPartitioned, Pusher, disc_coverage,
-    evaluate_expert, record_planar_push_dataset, run_episode,
+    BEHAVIOURS, CORNER_SLIDE, REGION_OVERLAP, VIA_TOL, ExpertReachGoal, Leg, PlayFullSpace, PlayPartitioned,
+    Pusher, disc_coverage, evaluate_expert, record_planar_push_dataset, run_episode,
 )
 from lerobot_efm.envs.planar_push.env import EVAL_PAIRS, GYM_ID, SUCCESS_TOL, TASK_NAMES
 from lerobot_efm.envs.planar_push.maze import CELL, inside_region, region_of, wall_distance

@@ -109,7 +109,10 @@ class Pusher:
 
     def corner_via(self, corner: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
         """A point CORNER_SLIDE from ``corner`` along one of its two walls (random, among those the disc may
-        use), from which a straight push slides the disc along the wall into the corner; None if neither."""
+        use), from which a straight push slides the disc along the wall into the corner; None if neither, or if
+        ``corner`` is not a maze corner."""
+        if np.abs(corner).min() < CORNER - 1e-9:
+            return None
         inward = -np.sign(corner)
         vias = [corner + inward * axis * CORNER_SLIDE for axis in (np.array([1.0, 0.0]), np.array([0.0, 1.0]))]
         vias = [v for v in vias if self.obj_free[grid_index(v)]
@@ -252,9 +255,10 @@ class ExpertReachGoal:
 @dataclass
 class Leg:
     """One step of a play plan. ``kind``: "disc" (push the disc near ``target``), "disc_via" (push it onto
-    ``target``, lining it up for the next leg), "disc_stop" (push it onto ``target`` and stop there), "effector" (move the
-    hand alone) or "pause" (hold the hand where it is for ``frames``; ``target`` is set when the pause starts).
-    A ``slide`` pushes along the straight line from where the disc is when the leg starts (``direction``)."""
+    ``target``, lining it up for the next leg), "disc_stop" (push it onto ``target`` and stop there),
+    "effector" (move the hand alone) or "pause" (hold the hand where it is for ``frames``; ``target`` is set
+    when the pause starts). A ``slide`` pushes along the straight line from where the disc is when the leg
+    starts (``direction``, set then)."""
 
     kind: str
     target: np.ndarray | None = None
@@ -303,7 +307,7 @@ class PlayFullSpace:
             self._queue = [Leg("effector", self._random_effector_point(s[2:]))]
         elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall or into a corner, stopping there
             target = self.pusher.sample_wall_disc(self.rng)
-            via = self.pusher.corner_via(target, self.rng) if np.abs(target).min() >= CORNER - 1e-9 else None
+            via = self.pusher.corner_via(target, self.rng)
             self._queue = [Leg("disc_stop", target, slide=via is not None)]
             if via is not None:
                 self._queue.insert(0, Leg("disc_via", via))
