@@ -10,8 +10,9 @@ from lerobot.envs.factory import make_env
 from lerobot.envs.utils import preprocess_observation
 from lerobot_efm.envs import PlanarPushEnv, PlanarPushEnvConfig
 from lerobot_efm.envs.planar_push.demonstrators import (
-    BEHAVIOURS, CORNER_SLIDE, REGION_OVERLAP, VIA_TOL, ExpertReachGoal, Leg, PlayFullSpace, PlayPartitioned,
-    Pusher, disc_coverage, evaluate_expert, record_planar_push_dataset, run_episode,
+    BEHAVIOURS, CORNER_SLIDE, CURSOR_REACH, REGION_OVERLAP, VIA_TOL, ExpertReachGoal, Leg, PlayFullSpace,
+    PlayPartitioned, Pusher, disc_coverage, evaluate_expert, main, parse_options, record_planar_push_dataset,
+    run_episode,
 )
 from lerobot_efm.envs.planar_push.env import EVAL_PAIRS, GYM_ID, SUCCESS_TOL, TASK_NAMES
 from lerobot_efm.envs.planar_push.maze import CELL, inside_region, region_of, wall_distance
@@ -143,6 +144,32 @@ def test_demonstrators_valid_actions(env, behaviour):
     assert np.all(np.isfinite(actions)) and np.all(np.abs(actions) <= 1.0)
     assert np.linalg.norm(states[-1, 2:] - states[0, 2:]) > 0.1 or behaviour == "expert"  # play moves the disc
     assert disc_coverage(states) > 0.0
+
+
+@pytest.mark.parametrize("behaviour", sorted(BEHAVIOURS))
+def test_commands_trail_the_effector_like_a_cursor(env, behaviour):
+    """Commands stay within CURSOR_REACH (+ noise) of the effector, as a human's cursor: a far command moves the
+    hand exactly as its point at the force clip does, so it would be an action no state determines."""
+    cls, _, _ = BEHAVIOURS[behaviour]
+    states, actions, _, _ = run_episode(env, cls(env, np.random.default_rng(2)), 600)
+    lead = np.linalg.norm(actions - states[:, :2], axis=1)
+    assert lead.max() < CURSOR_REACH + 0.05, lead.max()  # noise: 0.01 per axis in play
+    far = cls(env, np.random.default_rng(2), cursor_reach=None)
+    states, actions, _, _ = run_episode(env, far, 600)
+    assert np.linalg.norm(actions - states[:, :2], axis=1).max() > 0.3  # the option turns it off
+
+
+def test_recorder_options_reach_the_operator(tmp_path):
+    assert parse_options(PlayPartitioned, ["noise=0.003", "cursor_reach=none", "region=2"]) == {
+        "noise": 0.003, "cursor_reach": None, "region": 2}
+    with pytest.raises(ValueError, match="'nois=1'.*noise"):
+        parse_options(PlayFullSpace, ["nois=1"])
+    with pytest.raises(ValueError, match="'abc' is not a number"):
+        parse_options(PlayFullSpace, ["noise=abc"])
+    main(["--behaviour", "partitioned", "--root", str(tmp_path / "pp"), "--frames", "50", "--option", "region=1"])
+    states = np.stack(LeRobotDataset("local/planar_push_partitioned", root=tmp_path / "pp").hf_dataset[
+        "observation.state"])
+    assert inside_region(states[:, 2:], 1, -REGION_OVERLAP - 0.03).all()
 
 
 def test_expert_reaches_its_corner(env):

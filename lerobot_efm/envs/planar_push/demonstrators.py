@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .maze import (
-    ARENA, EFFECTOR_CLEARANCE, EFFECTOR_RADIUS, GRID_COORDS, GRID_H, MAZE_CELLS, OBJECT_CLEARANCE, OBJECT_RADIUS,
+    ARENA, CORNER, EFFECTOR_CLEARANCE, EFFECTOR_RADIUS, GRID_COORDS, GRID_H, MAZE_CELLS, OBJECT_CLEARANCE, OBJECT_RADIUS,
     REGION_NAMES, distance_field, free_disc_cells, free_mask, grid_index, grid_path, grid_point, inside_region,
     lookahead, maze_cell_of, nearest_free, segment_clear, wall_distance,
 )
@@ -38,7 +38,6 @@ STAGE = PUSH_GAP + 0.04  # staging distance behind the disc
 ALIGN_COS = np.cos(np.deg2rad(22.0))
 STATIC_LEAD = 0.035  # just under 0.04 = friction 2 / KP 50: a push with this lead stalls
 MAX_LEAD = 0.1  # full push: spring force 5 (the clip)
-CORNER = ARENA - OBJECT_RADIUS - 0.03
 CORNERS = np.array([[-CORNER, -CORNER], [CORNER, -CORNER], [-CORNER, CORNER], [CORNER, CORNER]])
 START_MARGIN = 0.16  # random disc starts/targets: room for the effector between disc and wall
 # Human operators rest on a reached goal: in the authors' expert recordings the disc rests at its final spot
@@ -62,6 +61,14 @@ REGION_OVERLAP = OBJECT_RADIUS
 # along a wall). Corner legs first bring the disc onto a wall's line this far from the corner.
 CORNER_SLIDE = 0.35
 VIA_TOL = 0.02  # the disc stops this close to such a via point, lined up for the slide
+SLIDE_TILT = 0.08  # a slide pushes this much into its wall (isotropic friction: else it may stop short of it)
+# A human moves a mouse cursor that the effector trails (the authors' recordings: |cmd - eff| = 0.063 on
+# average); a script may instead command a far target at once. Beyond MAX_LEAD = 0.1 from the effector the force
+# is clipped (5), so every command along that ray moves the hand the same way: the recorded action is then an
+# arbitrary point of a ray (up to 1.9 away in our play), which the actor must model and which no state predicts.
+# The operators send their command at most this far from the effector: the same motion, a determined action.
+CURSOR_REACH = 0.12
+PUSH_LOOKAHEAD = 0.35  # the disc is pushed at the farthest point of its grid path this far along it in sight
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -81,15 +88,19 @@ class Pusher:
     ``region`` confines disc paths (and targets sampled by :meth:`sample_disc`) to one maze region.
     """
 
-    def __init__(self, region: int | None = None, region_margin: float = -REGION_OVERLAP):
-        self.region = region
+    def __init__(self, region: int | None = None, region_margin: float = -REGION_OVERLAP,
+                 lookahead: float = PUSH_LOOKAHEAD):
+        self.region, self.lookahead = region, float(lookahead)
         self.obj_free = free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE, region, region_margin)
         self.start_free = free_mask(OBJECT_RADIUS + START_MARGIN, region, region_margin + 0.04)
         self.eff_free = free_mask(EFFECTOR_RADIUS + 0.01)
         # wall-adjacent disc targets: free for the disc, but not WALL_BAND further from the walls
         self.wall_nodes = np.argwhere(self.obj_free & ~free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE + WALL_BAND))
-        self.corners = [c for c in CORNERS  # the maze corners a disc of this region can stop in
-                        if np.linalg.norm(grid_point(*nearest_free(self.obj_free, c)) - c) < GRID_H]
+        # the maze corners a disc of this region can stop in (planned paths keep OBJECT_CLEARANCE off the walls,
+        # a corner only CORNER's gap: its nearest free node is that much further on each axis)
+        reach = GRID_H + np.sqrt(2) * (CORNER - (ARENA - OBJECT_RADIUS - OBJECT_CLEARANCE))
+        self.corners = [c for c in CORNERS
+                        if np.linalg.norm(grid_point(*nearest_free(self.obj_free, c)) - c) < reach]
         self._obj_fields: dict[tuple[int, int], np.ndarray] = {}
         self._eff_plan: tuple | None = None
 
@@ -115,8 +126,9 @@ class Pusher:
             return None
         inward = -np.sign(corner)
         vias = [corner + inward * axis * CORNER_SLIDE for axis in (np.array([1.0, 0.0]), np.array([0.0, 1.0]))]
-        vias = [v for v in vias if self.obj_free[grid_index(v)]
-                and segment_clear(v, corner, OBJECT_RADIUS + 0.005)]
+        fits = OBJECT_RADIUS + 0.004  # on the wall's line: as close to the wall as the corner itself
+        vias = [v for v in vias if wall_distance(v) >= fits and segment_clear(v, corner, fits)
+                and (self.region is None or inside_region(v, self.region, -REGION_OVERLAP))]
         return vias[rng.integers(len(vias))].copy() if vias else None
 
     def sample_effector(self, rng: np.random.Generator, obj: np.ndarray, near: float | None = None) -> np.ndarray:
@@ -143,12 +155,12 @@ class Pusher:
 
     def _push_direction(self, obj: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
         """Unit push direction (rotated until there is room behind the disc) and whether it aims at the target."""
-        direct = np.linalg.norm(target - obj) < 0.3 and segment_clear(obj, target, OBJECT_RADIUS + 0.005)
+        direct = np.linalg.norm(target - obj) < 0.3 and segment_clear(obj, target, OBJECT_RADIUS + 0.004)
         if direct:
             waypoint = target
         else:
             path = grid_path(self._field(target), obj, self.obj_free)
-            waypoint = lookahead(path, obj, OBJECT_RADIUS + 0.01, 0.35)
+            waypoint = lookahead(path, obj, OBJECT_RADIUS + 0.01, self.lookahead)
         u = _unit(waypoint - obj)
         for deg in (0, 15, -15, 30, -30, 45, -45, 60, -60, 75, -75, 90, -90):  # room behind the disc?
             v = _rot(u, deg)
@@ -190,8 +202,27 @@ class Pusher:
         return self.move_effector(eff, obj, obj - u * STAGE)
 
 
+def slide_direction(obj: np.ndarray, corner: np.ndarray) -> np.ndarray:
+    """Push direction of a slide along a wall into ``corner``: at it, tilted SLIDE_TILT into the wall the disc slides
+    along (the axis on which it is closest to the corner), so that it rides the wall and ends against both."""
+    to_corner = corner - obj
+    along = int(np.argmin(np.abs(to_corner)))
+    tilt = np.zeros(2)
+    tilt[along] = SLIDE_TILT * np.sign(corner[along])
+    return _unit(_unit(to_corner) + tilt)
+
+
 def _clip(cmd: np.ndarray) -> np.ndarray:
     return np.clip(cmd, -ARENA, ARENA).astype(np.float32)
+
+
+def cursor(eff: np.ndarray, cmd: np.ndarray, reach: float | None = CURSOR_REACH) -> np.ndarray:
+    """``cmd`` brought within ``reach`` of the effector along the same ray (None: unchanged)."""
+    if reach is None:
+        return cmd
+    offset = cmd - eff
+    n = float(np.linalg.norm(offset))
+    return eff + offset * (reach / n) if n > reach else cmd
 
 
 class ExpertReachGoal:
@@ -200,8 +231,10 @@ class ExpertReachGoal:
     current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
 
     def __init__(self, env, rng: np.random.Generator, goal=None, noise: float = 0.003, min_path: float = 0.8,
-                 tolerance: float = 0.025, rest: tuple[int, int] = EXPERT_REST):
+                 tolerance: float = 0.025, rest: tuple[int, int] = EXPERT_REST,
+                 cursor_reach: float | None = CURSOR_REACH):
         self.env, self.rng, self.noise, self.min_path, self.tol = env, rng, float(noise), float(min_path), tolerance
+        self.cursor_reach = cursor_reach
         self.fixed_goal = None if goal is None else np.asarray(goal, dtype=np.float64).reshape(4)
         self.rest = (int(rest[0]), int(rest[1]))
         self.pusher = Pusher()
@@ -245,7 +278,7 @@ class ExpertReachGoal:
         else:
             self._rest_left, self._rest_at = int(self.rng.integers(self.rest[0], self.rest[1] + 1)), eff.copy()
             return self.act(obs)
-        return _clip(cmd + self.rng.normal(0.0, self.noise, 2))
+        return _clip(cursor(eff, cmd, self.cursor_reach) + self.rng.normal(0.0, self.noise, 2))
 
     @property
     def done(self) -> bool:
@@ -273,9 +306,14 @@ class PlayFullSpace:
 
     region: int | None = None
 
-    def __init__(self, env, rng: np.random.Generator, noise: float = 0.01, leg_budget: int = 250, **_):
+    def __init__(self, env, rng: np.random.Generator, noise: float = 0.01, leg_budget: int = 250,
+                 cursor_reach: float | None = CURSOR_REACH, pause_share: float = 0.12, effector_share: float = 0.18,
+                 rest_after_disc: float = PLAY_REST_AFTER_DISC, push_lookahead: float = PUSH_LOOKAHEAD, **_):
         self.env, self.rng, self.noise, self.leg_budget = env, rng, float(noise), int(leg_budget)
-        self.pusher = Pusher(self.region)
+        self.cursor_reach = cursor_reach
+        self.pause_share, self.effector_share = float(pause_share), float(effector_share)
+        self.rest_after_disc, self.push_lookahead = float(rest_after_disc), float(push_lookahead)
+        self.pusher = Pusher(self.region, lookahead=self.push_lookahead)
         self._queue: list[Leg] = []
         self._budget = 0
         self._lead = MAX_LEAD
@@ -301,9 +339,9 @@ class PlayFullSpace:
     def _new_leg(self, s: np.ndarray) -> None:
         r = self.rng.random()
         self._budget, self._lead = self.leg_budget, self.rng.uniform(0.06, MAX_LEAD)
-        if r < 0.12:
+        if r < self.pause_share:
             self._queue = [self._pause()]
-        elif r < 0.3:
+        elif r < self.pause_share + self.effector_share:
             self._queue = [Leg("effector", self._random_effector_point(s[2:]))]
         elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall or into a corner, stopping there
             target = self.pusher.sample_wall_disc(self.rng)
@@ -311,13 +349,13 @@ class PlayFullSpace:
             self._queue = [Leg("disc_stop", target, slide=via is not None)]
             if via is not None:
                 self._queue.insert(0, Leg("disc_via", via))
-            if via is not None or self.rng.random() < PLAY_REST_AFTER_DISC:  # nothing more to push in a corner
+            if via is not None or self.rng.random() < self.rest_after_disc:  # nothing more to push in a corner
                 self._queue.append(self._pause())
         else:
             self._queue = [Leg("disc", self.pusher.sample_disc(self.rng))]
             if self.rng.random() < 0.3:  # detour through another point first
                 self._queue.insert(0, Leg("disc", self.pusher.sample_disc(self.rng)))
-            if self.rng.random() < PLAY_REST_AFTER_DISC:  # a human often lets go once the disc is there
+            if self.rng.random() < self.rest_after_disc:  # a human often lets go once the disc is there
                 self._queue.append(self._pause())
 
     def _pause(self) -> Leg:
@@ -350,11 +388,12 @@ class PlayFullSpace:
                 cmd = self.pusher.move_effector(eff, obj, leg.target)
             else:
                 if leg.slide and leg.direction is None:  # the slide's line is fixed where it starts
-                    leg.direction = _unit(leg.target - obj)
-                cmd = self.pusher.push(s, leg.target, final=leg.kind != "disc", lead=self._lead,
+                    leg.direction = slide_direction(obj, leg.target)
+                # a slide into a corner needs no braking: the walls stop the disc, against both of them
+                cmd = self.pusher.push(s, leg.target, final=leg.kind != "disc" and not leg.slide, lead=self._lead,
                                        direction=leg.direction)
             break
-        return _clip(cmd + self.rng.normal(0.0, self.noise, 2))
+        return _clip(cursor(eff, cmd, self.cursor_reach) + self.rng.normal(0.0, self.noise, 2))
 
     @property
     def done(self) -> bool:
@@ -366,8 +405,8 @@ class PlayPartitioned(PlayFullSpace):
     disc paths stay within REGION_OVERLAP beyond the region's borders, effector-only moves stay near it."""
 
     def __init__(self, env, rng: np.random.Generator, region: int | None = None, **kwargs):
-        self.fixed_region = region
-        self.region = region if region is not None else int(rng.integers(len(REGION_NAMES)))
+        self.fixed_region = None if region is None else int(region)
+        self.region = self.fixed_region if region is not None else int(rng.integers(len(REGION_NAMES)))
         self._pushers = {}
         super().__init__(env, rng, **kwargs)
         self._pushers[self.region] = self.pusher
@@ -376,7 +415,7 @@ class PlayPartitioned(PlayFullSpace):
         if self.fixed_region is None:
             self.region = int(self.rng.integers(len(REGION_NAMES)))
         if self.region not in self._pushers:
-            self._pushers[self.region] = Pusher(self.region)
+            self._pushers[self.region] = Pusher(self.region, lookahead=self.push_lookahead)
         self.pusher = self._pushers[self.region]
 
 
@@ -460,10 +499,11 @@ def evaluate_expert(max_steps: int = 600) -> dict[str, float]:
 
 def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int = 0, with_images: bool = False,
                                repo_id: str | None = None, image_size: int = 96, max_episode_frames: int | None = None,
-                               verbose: bool = False):
+                               verbose: bool = False, operator_options: dict | None = None):
     """Record episodes of ``behaviour`` (expert | full | partitioned) until about ``num_frames`` frames into a
     new LeRobot v3 dataset at ``root`` (must not exist). Expert episodes that do not reach their corner are
-    dropped. Returns the dataset reopened read-only."""
+    dropped. ``operator_options`` are keyword arguments of the operator class (e.g. ``noise``). Returns the
+    dataset reopened read-only."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
     from lerobot_efm.recording import finalizing
     from lerobot.utils.utils import SuppressProgressBars
@@ -481,7 +521,7 @@ def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int 
     env = PlanarPushEnv(task="pair0", obs_type="pixels_state" if with_images else "state", image_size=image_size,
                         terminate_on_success=False)
     env.reset(seed=seed)
-    operator = cls(env, rng)
+    operator = cls(env, rng, **(operator_options or {}))
     ds = LeRobotDataset.create(repo_id, fps=FPS, features=planar_push_features(with_images, image_size), root=root,
                                use_videos=with_images)
     total, dropped, t0 = 0, 0, time.perf_counter()
@@ -505,6 +545,28 @@ def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int 
     return LeRobotDataset(repo_id, root=root)
 
 
+def parse_options(cls, items: list[str]) -> dict:
+    """``NAME=VALUE`` strings -> operator keyword arguments (numbers, or None for ``none``), checked against
+    ``cls.__init__``."""
+    import inspect
+
+    allowed = {n: p.default for c in cls.__mro__[:-1] if "__init__" in vars(c)  # [:-1]: not object
+               for n, p in inspect.signature(c.__init__).parameters.items()
+               if n not in ("self", "env", "rng") and p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)}
+    options = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in allowed:
+            raise ValueError(f"--option {item!r}: expected NAME=VALUE with NAME one of {sorted(allowed)} "
+                             f"({cls.__name__})")
+        try:
+            number = None if value.lower() == "none" else float(value)
+            options[name] = int(number) if isinstance(allowed[name], int) and number is not None else number
+        except ValueError:
+            raise ValueError(f"--option {item!r}: value {value!r} is not a number or 'none'") from None
+    return options
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description="Record scripted planar push demonstrations (LeRobot v3 dataset).")
     ap.add_argument("--behaviour", required=True, choices=sorted(BEHAVIOURS))
@@ -514,10 +576,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--images", action="store_true", help="also record observation.images.top (video)")
     ap.add_argument("--image-size", type=int, default=96)
+    ap.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
+                    help="operator keyword argument (repeatable), e.g. noise=0.003 or cursor_reach=none")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     ds = record_planar_push_dataset(args.behaviour, args.root, args.frames, args.seed, args.images, args.repo_id,
-                                    args.image_size, verbose=True)
+                                    args.image_size, verbose=True,
+                                    operator_options=parse_options(BEHAVIOURS[args.behaviour][0], args.option))
     states = np.stack([np.asarray(x) for x in ds.hf_dataset["observation.state"]])
     print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in "
           f"{time.perf_counter() - t0:.0f} s; disc coverage {disc_coverage(states):.2f} of the maze cells")

@@ -7,8 +7,13 @@ Physics (constants of the reference, ``reference-implementation.md`` §6; our Mu
   disc angle in observations and success). They are spheres centred at z = 0, so contacts with each other and
   with the vertical wall boxes are exactly those of discs in the plane.
 * disc r = 0.2, density 0.8 -> mass 0.8*pi*r^2; effector r = 0.075, density 1 -> mass pi*r^2.
-* top-down friction of the disc (pymunk PivotJoint max_force 2.0 to the ground): ``frictionloss = 2`` on each
-  slide joint (a Coulomb force of at most 2 per axis); the GearJoint (rotation friction) has no counterpart.
+* top-down friction of the disc (pymunk PivotJoint max_force 2.0 to the ground): an isotropic Coulomb force,
+  applied each substep, that would stop the disc within the substep against the last constraint (contact)
+  forces, clipped to norm 2 (:meth:`PlanarPushEnv._ground_friction`). MuJoCo's ``frictionloss`` acts on each
+  slide joint separately: with it the disc slid along the axes (pushed at 30 deg it moved at 10 deg, at 60 deg at
+  80 deg), as no disc on a table does. The GearJoint (rotation friction) has no counterpart.
+* contact friction (effector-disc, disc-walls) 0.05: with 0.3 a hand lining up behind a sliding disc dragged it
+  sideways, off the wall it was slid along.
 * effector force F = clip_norm(50*(cmd - pos), 5) - 1.5*vel: the spring part is applied each substep as
   ``qfrc_applied``, the damping is the joints' ``damping = 1.5`` (integrated implicitly).
 * one env step = 3 substeps of 1/200 s (as the reference; the env runs at 20 Hz of *control*).
@@ -45,7 +50,7 @@ from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
 
 from ..goal_env import GoalEnvConfig, add_camera_features, state_goal_features, state_goal_features_map
-from .maze import ARENA, EFFECTOR_RADIUS, OBJECT_RADIUS, wall_boxes, wall_distance
+from .maze import ARENA, CORNER, EFFECTOR_RADIUS, OBJECT_RADIUS, wall_boxes, wall_distance
 
 GYM_ID = "lerobot_efm/PlanarPush-v0"
 ENV_TYPE = "planar_push"
@@ -73,20 +78,21 @@ def _pair(name, eff0, obj0, eff1, obj1):
     return name, np.array([*eff0, *obj0], dtype=np.float64), np.array([*eff1, *obj1], dtype=np.float64)
 
 
-# (description, initial [eff, obj], goal [eff, obj]); corner disc positions are 0.03 off the walls.
+# (description, initial [eff, obj], goal [eff, obj]); corner discs rest against both walls (maze.CORNER).
 # The goal effector sits behind the disc w.r.t. the last push, as in the last frame of a demonstration.
 # Starts are near corners, never in them: a disc wedged in a corner leaves no room behind it to push it out.
-C, N = ARENA - OBJECT_RADIUS - 0.03, 0.5
+C, N = CORNER, 0.5
+B = C - OBJECT_RADIUS - EFFECTOR_RADIUS - 0.01  # the hand where a slide into a corner leaves it
 EVAL_PAIRS = (
-    _pair("bottom-right corner to top-right corner", (0.15, -N), (N, -N), (0.47, C), (C, C)),
-    _pair("top-right corner to bottom-right corner", (0.15, N), (N, N), (0.47, -C), (C, -C)),
-    _pair("bottom band to top-left corner", (0.8, -0.55), (0.5, -0.55), (-C, 0.47), (-C, C)),
-    _pair("top band to bottom-left corner", (0.8, 0.55), (0.5, 0.55), (-C, -0.47), (-C, -C)),
-    _pair("bottom-left corner to top-right corner", (-0.15, -N), (-N, -N), (0.47, C), (C, C)),
-    _pair("left passage to bottom-right corner", (-0.6, 0.35), (-0.6, 0.0), (0.47, -C), (C, -C)),
+    _pair("bottom-right corner to top-right corner", (0.15, -N), (N, -N), (B, C), (C, C)),
+    _pair("top-right corner to bottom-right corner", (0.15, N), (N, N), (B, -C), (C, -C)),
+    _pair("bottom band to top-left corner", (0.8, -0.55), (0.5, -0.55), (-C, B), (-C, C)),
+    _pair("top band to bottom-left corner", (0.8, 0.55), (0.5, 0.55), (-C, -B), (-C, -C)),
+    _pair("bottom-left corner to top-right corner", (-0.15, -N), (-N, -N), (B, C), (C, C)),
+    _pair("left passage to bottom-right corner", (-0.6, 0.35), (-0.6, 0.0), (B, -C), (C, -C)),
     _pair("top band to bottom band", (0.0, 0.75), (0.3, 0.5), (0.0, -0.55), (0.3, -0.55)),
-    _pair("top-left corner to bottom-right corner", (-0.15, N), (-N, N), (0.47, -C), (C, -C)),
-    _pair("bottom band centre to bottom-right corner", (-0.5, -0.55), (-0.2, -0.55), (0.47, -C), (C, -C)),
+    _pair("top-left corner to bottom-right corner", (-0.15, N), (-N, N), (B, -C), (C, -C)),
+    _pair("bottom band centre to bottom-right corner", (-0.5, -0.55), (-0.2, -0.55), (B, -C), (C, -C)),
     _pair("top-right corner to the left passage", (N, 0.2), (N, N), (-0.6, 0.3), (-0.6, 0.0)),
 )
 TASK_NAMES = tuple(f"pair{k}" for k in range(len(EVAL_PAIRS)))
@@ -131,15 +137,15 @@ def build_mjcf(offscreen: int = 256) -> str:
   <option timestep="{TIMESTEP}" gravity="0 0 0" integrator="implicitfast"/>
   <visual><global offwidth="{offscreen}" offheight="{offscreen}"/><quality shadowsize="0"/>
     <headlight ambient="0.9 0.9 0.9" diffuse="0.1 0.1 0.1" specular="0 0 0"/></visual>
-  <default><geom friction="0.3 0.005 0.0001" solref="0.01 1"/></default>
+  <default><geom friction="0.05 0.005 0.0001" solref="0.01 1"/></default>
   <worldbody>
     <camera name="{CAMERA}" pos="0 0 2" xyaxes="1 0 0 0 1 0" projection="orthographic" fovy="{2 * ARENA}"/>
     <geom name="floor" type="box" pos="0 0 -0.3" size="{ARENA} {ARENA} 0.01" rgba="0.93 0.93 0.9 1"
           contype="0" conaffinity="0"/>
 {wall_xml}
     <body name="object" pos="0 0 0">
-      <joint name="obj_x" type="slide" axis="1 0 0" frictionloss="{OBJECT_GROUND_FRICTION}"/>
-      <joint name="obj_y" type="slide" axis="0 1 0" frictionloss="{OBJECT_GROUND_FRICTION}"/>
+      <joint name="obj_x" type="slide" axis="1 0 0"/>
+      <joint name="obj_y" type="slide" axis="0 1 0"/>
       <geom name="object" type="sphere" size="{OBJECT_RADIUS}" mass="{m_obj:.6f}" rgba="0.85 0.2 0.2 1"/>
     </body>
     <body name="effector" pos="0 0 0">
@@ -190,6 +196,8 @@ class PlanarPushEnv(gym.Env):
         jnt = {n: self.model.joint(n) for n in ("eff_x", "eff_y", "obj_x", "obj_y")}
         self._qpos = np.array([jnt[n].qposadr[0] for n in STATE_NAMES])  # [eff_x, eff_y, obj_x, obj_y]
         self._eff_dof = np.array([jnt["eff_x"].dofadr[0], jnt["eff_y"].dofadr[0]])
+        self._obj_dof = np.array([jnt["obj_x"].dofadr[0], jnt["obj_y"].dofadr[0]])
+        self._obj_mass = float(self.model.body("object").mass[0])
         self._mocap = (self.model.body("goal_effector").mocapid[0], self.model.body("goal_object").mocapid[0])
         self._renderers: dict[int, object] = {}
 
@@ -312,10 +320,20 @@ class PlanarPushEnv(gym.Env):
             if norm > MAX_FORCE:
                 force *= MAX_FORCE / norm
             d.qfrc_applied[self._eff_dof] = force
+            d.qfrc_applied[self._obj_dof] = self._ground_friction()
             mj.mj_step(self.model, d)
         info = self._info()
         success = info["is_success"]
         return self.observe(), self._reward(info), bool(success and self.terminate_on_success), False, info
+
+    def _ground_friction(self) -> np.ndarray:
+        """Isotropic Coulomb friction of the disc on the ground: the force that stops it within one substep against
+        the constraint forces of the last substep (contacts with the effector and the walls), at most
+        OBJECT_GROUND_FRICTION in norm (static below it, kinetic at it)."""
+        d = self.data
+        stop = -(self._obj_mass * d.qvel[self._obj_dof] / TIMESTEP + d.qfrc_constraint[self._obj_dof])
+        norm = float(np.linalg.norm(stop))
+        return stop if norm <= OBJECT_GROUND_FRICTION else stop * (OBJECT_GROUND_FRICTION / norm)
 
     def _goal_distance(self) -> float:
         return float(sum(self.errors()))

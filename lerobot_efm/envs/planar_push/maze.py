@@ -43,6 +43,9 @@ GRID_N = 45  # planning grid nodes per axis
 GRID_H = 2.0 * ARENA / GRID_N
 GRID_COORDS = -ARENA + (np.arange(GRID_N) + 0.5) * GRID_H
 OBJECT_CLEARANCE = 0.03  # planned disc centres keep this much space to walls beyond the radius
+# A disc pushed into a corner comes to rest against both walls (isotropic ground friction: a slide along a wall
+# ends touching it); corner goals and targets sit this far off them.
+CORNER = ARENA - OBJECT_RADIUS - 0.005
 EFFECTOR_CLEARANCE = 0.02
 
 
