@@ -4,8 +4,8 @@
 The learning itself lives in :mod:`lerobot_efm.agents`.
 """
 
-from __future__ import annotations
-
+# No `from __future__ import annotations`: LeRobot (and its generic policy tests) read the `config` annotation of
+# `__init__` as a class.
 import copy
 import math
 import os

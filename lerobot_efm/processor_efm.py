@@ -1,16 +1,43 @@
 """Pre/post-processors of the EFM policies: LeRobot's default pipeline (rename, batch, device,
-normalise; unnormalise, cpu) with the goal keys normalised by the statistics of the observation they
-mirror (``observation.goal.state`` uses the stats of ``observation.state``, and so on)."""
+normalise; unnormalise, cpu) with the goal keys batched like, and normalised by the statistics of, the
+observation they mirror (``observation.goal.state`` uses the stats of ``observation.state``, and so on)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import torch
 
-from lerobot.processor import PolicyAction, PolicyProcessorPipeline, make_default_pre_post_processors
+from lerobot.configs import PipelineFeatureType, PolicyFeature
+from lerobot.processor import ObservationProcessorStep, PolicyAction, PolicyProcessorPipeline, ProcessorStepRegistry
+from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
 
-from .configuration_efm import MIRROR_PREFIXES, EFMConfig, is_mirror_key, mirror_key
+from .configuration_efm import GOAL_PREFIX, MIRROR_PREFIXES, EFMConfig, is_mirror_key, mirror_key
+
+GOAL_BATCH_STEP = "efm_goal_batch_processor"
+
+
+@dataclass
+@ProcessorStepRegistry.register(name=GOAL_BATCH_STEP)
+class AddBatchDimensionToGoalsStep(ObservationProcessorStep):
+    """Adds the batch dimension to the goal keys (``observation.goal.state``, ``observation.goal.images.*``),
+    which LeRobot's batch step leaves alone: it only knows ``observation.state`` and ``observation.images.*``.
+    An unbatched robot observation then reaches the policy with its goal batched the same way."""
+
+    def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
+        observation = dict(observation)
+        for key, value in observation.items():
+            if isinstance(value, torch.Tensor) and key.startswith(GOAL_PREFIX):
+                unbatched_rank = 3 if ".images." in key else 1
+                if value.dim() == unbatched_rank:
+                    observation[key] = value.unsqueeze(0)
+        return observation
+
+    def transform_features(
+        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
+    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
+        return features
 
 
 def mirror_stats(stats: dict[str, dict[str, Any]] | None) -> dict[str, dict[str, Any]] | None:
@@ -35,7 +62,11 @@ def make_efm_pre_post_processors(
 ]:
     # The goal features must be part of the config before the normaliser reads them.
     config.add_mirror_features()
-    return make_default_pre_post_processors(config, mirror_stats(dataset_stats))
+    s = make_default_policy_processor_steps(config, mirror_stats(dataset_stats))
+    return make_policy_processor_pipelines(
+        input_steps=[s.rename_observations, s.add_batch_dim, AddBatchDimensionToGoalsStep(), s.to_device, s.normalize],
+        output_steps=[s.unnormalize, s.to_cpu],
+    )
 
 
 # LeRobot resolves processors by policy type: make_<type>_pre_post_processors in the processor_ module.

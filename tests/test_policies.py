@@ -142,6 +142,31 @@ def test_video_observations(video_dataset):
     assert policy.select_action(inference_inputs(batch)).shape == (2, 2)
 
 
+@pytest.mark.parametrize("policy_type", EFM_TYPES)
+def test_policy_and_config_classes_as_lerobots_generic_test_reads_them(policy_type):
+    """LeRobot's ``test_get_policy_and_config_classes`` checks the config class against the ``config``
+    annotation of ``__init__``: a string annotation (``from __future__ import annotations``) makes it raise."""
+    import inspect
+
+    from lerobot.policies.factory import make_policy_config
+
+    policy_cls = get_policy_class(policy_type)
+    config = make_policy_config(policy_type)
+    assert policy_cls.name == policy_type and isinstance(config, policy_cls.config_class)
+    assert issubclass(policy_cls.config_class, inspect.signature(policy_cls.__init__).parameters["config"].annotation)
+
+
+def test_unbatched_robot_observation_with_goal_is_batched_by_the_preprocessor(state_dataset):
+    """A robot hands one unbatched observation (and its goal): the pre-processor batches the goal keys too."""
+    policy, pre, post, batch = build(state_dataset, "efm_ac")
+    policy.eval()
+    raw = {"observation.state": torch.tensor([0.1, -0.2]), "observation.goal.state": torch.tensor([0.3, 0.4])}
+    processed = pre(raw)
+    assert processed["observation.goal.state"].shape == processed["observation.state"].shape == (1, 2)
+    assert post(policy.select_action(processed)).shape == (1, 2)
+    assert pre(dict(batch))["observation.goal.state"].shape == batch["observation.goal.state"].shape
+
+
 def test_missing_goal_at_inference_names_the_key(state_dataset):
     policy, _, _, batch = build(state_dataset, "efm_ac")
     with pytest.raises(KeyError, match="observation.goal.state"):
