@@ -7,6 +7,8 @@ authors' reference implementation (planar-push trajectory settings, its network 
 
 from __future__ import annotations
 
+import logging
+
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -153,6 +155,15 @@ class EFMConfig(PreTrainedConfig):
 
     def __post_init__(self):
         super().__post_init__()
+        try:
+            self._validate()
+        except ValueError as e:
+            # draccus (every LeRobot CLI) re-raises this as "Couldn't instantiate class ... using the given
+            # arguments" without the reason: say it here, where it is known.
+            logging.getLogger(__name__).error("%s: %s", type(self).__name__, e)
+            raise
+
+    def _validate(self) -> None:
         self.unet_down_dims = tuple(self.unet_down_dims)
         self.mlp_hidden_dims = tuple(self.mlp_hidden_dims)
         self.image_encoder_channels = tuple(self.image_encoder_channels)

@@ -157,3 +157,13 @@ def test_lerobot_train_on_a_video_dataset(video_dataset_root, tmp_path):
     assert "loss_planner" in proc.stderr + proc.stdout
     config = json.loads((out / "checkpoints" / "last" / "pretrained_model" / "config.json").read_text())
     assert config["input_features"]["observation.goal.images.top"]["type"] == "VISUAL"
+
+
+def test_an_invalid_option_reaches_the_user_with_its_reason(tmp_path):
+    """draccus reports only "Couldn't instantiate class EFMACConfig"; the reason must be printed too."""
+    env = {**os.environ, "HF_HUB_OFFLINE": "1"}
+    proc = subprocess.run([str(BIN / "lerobot-train"), "--policy.type=efm_ac", "--policy.action_traj_len=7",
+                           f"--dataset.repo_id={REPO_ID}", f"--output_dir={tmp_path / 'out'}"],
+                          capture_output=True, text=True, timeout=300, env=env, cwd=REPO)
+    assert proc.returncode != 0
+    assert "action_traj_len=7 must be divisible by 8" in proc.stdout + proc.stderr, proc.stderr[-3000:]

@@ -12,8 +12,10 @@ All follow the operator protocol of ``lerobot-efm-record``: ``reset() -> obs``, 
 ``done``. Pushing is closed-loop: the effector stages behind the disc w.r.t. the next path waypoint (moving
 around the disc when needed), then pushes with a command ``lead`` past the contact point; the static disc
 friction (2) equals the spring force at 0.04 of lead, so ``lead = remaining + 0.035`` stops on the target.
+Every command trails the effector like a mouse cursor, at most :data:`CURSOR_REACH` from it.
 
 CLI: ``python -m lerobot_efm.envs.planar_push.demonstrators --behaviour expert --root DIR --frames 47000``
+(``--option noise=0.003`` etc. sets operator keyword arguments)
 """
 
 from __future__ import annotations
@@ -227,7 +229,8 @@ def cursor(eff: np.ndarray, cmd: np.ndarray, reach: float | None = CURSOR_REACH)
 
 class ExpertReachGoal:
     """Pushes the disc along a shortest path to a random corner at least ``min_path`` away (the paper's
-    "Expert reach goal"); ``done`` once it rests there. With ``goal`` (4-D [eff, obj]) it keeps the env's
+    "Expert reach goal"), the last stretch slid along one of the corner's walls as play does it (the hand then
+    ends where the corner evaluation goals have it); ``done`` once it rests there. With ``goal`` (4-D [eff, obj]) it keeps the env's
     current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
 
     def __init__(self, env, rng: np.random.Generator, goal=None, noise: float = 0.003, min_path: float = 0.8,
@@ -244,9 +247,11 @@ class ExpertReachGoal:
         self._done = False
         self._rest_left: int | None = None  # frames still to rest on the goal (None: not arrived yet)
         self._rest_at = np.zeros(2)
+        self._via: np.ndarray | None = None  # the corner's wall line point to line the disc up on first
+        self._slide: np.ndarray | None = None  # the slide's push direction, fixed where it starts
 
     def reset(self) -> dict:
-        self._done, self._pushing, self._rest_left = False, True, None
+        self._done, self._pushing, self._rest_left, self._via, self._slide = False, True, None, None, None
         if self.fixed_goal is not None:
             self.effector_goal, self.target = self.fixed_goal[:2].copy(), self.fixed_goal[2:].copy()
             return self.env.observe()
@@ -257,6 +262,7 @@ class ExpertReachGoal:
             if far:
                 break
         self.target = far[self.rng.integers(len(far))].copy()
+        self._via = self.pusher.corner_via(self.target, self.rng)
         eff = self.pusher.sample_effector(self.rng, obj, near=0.6)
         self.env.set_state(np.concatenate([eff, obj]))
         return self.env.observe()
@@ -268,16 +274,23 @@ class ExpertReachGoal:
             self._rest_left -= 1
             self._done = self._rest_left <= 0
             return _clip(self._rest_at + self.rng.normal(0.0, REST_NOISE, 2))
+        if self._via is not None:
+            if np.linalg.norm(obj - self._via) > VIA_TOL:
+                return self._command(eff, self.pusher.push(s, self._via, final=True))
+            self._via, self._slide = None, slide_direction(obj, self.target)
         err = float(np.linalg.norm(obj - self.target))
         # hysteresis: stop pushing within tol, push again if the disc drifted past 1.5 tol
         self._pushing = err > (self.tol if self._pushing else 1.5 * self.tol)
-        if self._pushing:
-            cmd = self.pusher.push(s, self.target, final=True)
+        if self._pushing:  # a slide needs no braking: the walls stop the disc
+            cmd = self.pusher.push(s, self.target, final=self._slide is None, direction=self._slide)
         elif self.effector_goal is not None and np.linalg.norm(eff - self.effector_goal) > self.tol:
             cmd = self.pusher.move_effector(eff, obj, self.effector_goal)
         else:
             self._rest_left, self._rest_at = int(self.rng.integers(self.rest[0], self.rest[1] + 1)), eff.copy()
             return self.act(obs)
+        return self._command(eff, cmd)
+
+    def _command(self, eff: np.ndarray, cmd: np.ndarray) -> np.ndarray:
         return _clip(cursor(eff, cmd, self.cursor_reach) + self.rng.normal(0.0, self.noise, 2))
 
     @property
