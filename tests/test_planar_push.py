@@ -45,6 +45,22 @@ def test_effector_pushes_disc(env):
     assert s[2] - s[0] == pytest.approx(0.275, abs=0.02)  # in contact, behind it
 
 
+@pytest.mark.parametrize("deg", [15, 30, 60])
+def test_disc_friction_is_isotropic(env, deg):
+    """Pushed along any direction the disc moves along it (the reference's pivot-joint friction); per-axis
+    friction (MuJoCo frictionloss on each slide joint) moved it at 1-3 / 10 / 80 deg. Under the static friction
+    (push force 1.5 < 2) it stays put."""
+    u = np.array([np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))])
+    obj = np.array([-0.5, -0.6])
+    for lead, moved in ((0.1, 0.05), (0.03, None)):
+        env.reset(options={"initial": [*(obj - u * 0.28), *obj], "goal": [*(obj - u * 0.28), *obj]})
+        disc = _run(env, obj - u * 0.275 + u * lead, 15)[2:] - obj
+        if moved is None:
+            assert np.linalg.norm(disc) < 0.01, disc
+        else:
+            assert np.linalg.norm(disc) > moved and abs(np.degrees(np.arctan2(disc[1], disc[0])) - deg) < 2.0, disc
+
+
 def test_walls_block_effector_and_disc(env):
     env.reset(options={"initial": [0.5, -0.5, -0.6, 0.5]})
     s = _run(env, [0.5, 0.5], 40)  # effector into the divider from below
