@@ -123,8 +123,9 @@ def main() -> None:
     a = p.parse_args()
     states, episodes = load_states(a.dataset)
     pairs = sample_pairs(states, episodes, a.episodes, np.random.default_rng(a.seed))
-    result = {"checkpoint": str(a.checkpoint), "dataset": str(a.dataset), **evaluate(a.checkpoint, pairs, a.max_steps,
-                                                                                     a.device, dict(x.split("=", 1) for x in a.set))}
+    overrides = dict(x.split("=", 1) for x in a.set)
+    result = {"checkpoint": str(a.checkpoint), "dataset": str(a.dataset),
+              **evaluate(a.checkpoint, pairs, a.max_steps, a.device, overrides)}
     print(json.dumps({k: v for k, v in result.items() if k not in ("trajectories", "goals")}))
     if a.out:
         a.out.write_text(json.dumps(result, indent=1) + "\n")

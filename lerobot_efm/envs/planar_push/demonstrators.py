@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from .maze import (
-    ARENA, CORNER, EFFECTOR_CLEARANCE, EFFECTOR_RADIUS, GRID_COORDS, GRID_H, MAZE_CELLS, OBJECT_CLEARANCE, OBJECT_RADIUS,
+    ARENA, CORNER, EFFECTOR_CLEARANCE, EFFECTOR_RADIUS, GRID_COORDS, GRID_H, MAZE_CELLS, OBJECT_CLEARANCE,
+    OBJECT_RADIUS,
     REGION_NAMES, distance_field, free_disc_cells, free_mask, grid_index, grid_path, grid_point, inside_region,
     lookahead, maze_cell_of, nearest_free, segment_clear, wall_distance,
 )
@@ -218,6 +219,11 @@ def _clip(cmd: np.ndarray) -> np.ndarray:
     return np.clip(cmd, -ARENA, ARENA).astype(np.float32)
 
 
+def _send(eff: np.ndarray, cmd: np.ndarray, reach: float | None, noise: float, rng: np.random.Generator):
+    """The command an operator sends: within ``reach`` of the hand (a cursor), with hand noise, in the arena."""
+    return _clip(cursor(eff, cmd, reach) + rng.normal(0.0, noise, 2))
+
+
 def cursor(eff: np.ndarray, cmd: np.ndarray, reach: float | None = CURSOR_REACH) -> np.ndarray:
     """``cmd`` brought within ``reach`` of the effector along the same ray (None: unchanged)."""
     if reach is None:
@@ -230,8 +236,8 @@ def cursor(eff: np.ndarray, cmd: np.ndarray, reach: float | None = CURSOR_REACH)
 class ExpertReachGoal:
     """Pushes the disc along a shortest path to a random corner at least ``min_path`` away (the paper's
     "Expert reach goal"), the last stretch slid along one of the corner's walls as play does it (the hand then
-    ends where the corner evaluation goals have it); ``done`` once it rests there. With ``goal`` (4-D [eff, obj]) it keeps the env's
-    current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
+    ends where the corner evaluation goals have it); ``done`` once it rests there. With ``goal`` (4-D [eff, obj])
+    it keeps the env's current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
 
     def __init__(self, env, rng: np.random.Generator, goal=None, noise: float = 0.003, min_path: float = 0.8,
                  tolerance: float = 0.025, rest: tuple[int, int] = EXPERT_REST,
@@ -291,7 +297,7 @@ class ExpertReachGoal:
         return self._command(eff, cmd)
 
     def _command(self, eff: np.ndarray, cmd: np.ndarray) -> np.ndarray:
-        return _clip(cursor(eff, cmd, self.cursor_reach) + self.rng.normal(0.0, self.noise, 2))
+        return _send(eff, cmd, self.cursor_reach, self.noise, self.rng)
 
     @property
     def done(self) -> bool:
@@ -406,7 +412,7 @@ class PlayFullSpace:
                 cmd = self.pusher.push(s, leg.target, final=leg.kind != "disc" and not leg.slide, lead=self._lead,
                                        direction=leg.direction)
             break
-        return _clip(cursor(eff, cmd, self.cursor_reach) + self.rng.normal(0.0, self.noise, 2))
+        return _send(eff, cmd, self.cursor_reach, self.noise, self.rng)
 
     @property
     def done(self) -> bool:
