@@ -10,12 +10,12 @@ from lerobot.envs.factory import make_env
 from lerobot.envs.utils import preprocess_observation
 from lerobot_efm.envs import PlanarPushEnv, PlanarPushEnvConfig
 from lerobot_efm.envs.planar_push.demonstrators import (
-    BEHAVIOURS, CORNER_SLIDE, CURSOR_REACH, REGION_OVERLAP, VIA_TOL, ExpertReachGoal, Leg, PlayFullSpace,
+    BEHAVIOURS, CORNER_SLIDE, CORNERS, CURSOR_REACH, REGION_OVERLAP, VIA_TOL, ExpertReachGoal, Leg, PlayFullSpace,
     PlayPartitioned, Pusher, disc_coverage, evaluate_expert, main, parse_options, record_planar_push_dataset,
     run_episode,
 )
 from lerobot_efm.envs.planar_push.env import EVAL_PAIRS, GYM_ID, SUCCESS_TOL, TASK_NAMES
-from lerobot_efm.envs.planar_push.maze import CELL, inside_region, region_of, wall_distance
+from lerobot_efm.envs.planar_push.maze import CELL, CORNER, inside_region, region_of, wall_distance
 
 
 @pytest.fixture(scope="module")
@@ -217,13 +217,26 @@ def test_expert_slides_into_its_corner_and_leaves_the_hand_behind_the_disc():
     """Expert episodes end the way the corner evaluation goals are: disc in the corner, hand behind it along a
     wall (a straight push at the corner leaves the hand on the diagonal, off every corner goal)."""
     env = PlanarPushEnv(task="all")
-    op = ExpertReachGoal(env, np.random.default_rng(0))
-    goals = np.array([g for _, _, g in EVAL_PAIRS[:4]])
+    op = ExpertReachGoal(env, np.random.default_rng(0), corner_share=1.0)
+    hand_gap = EVAL_PAIRS[0][2][3] - EVAL_PAIRS[0][2][0]  # corner goal: hand this far from the disc, on a wall
+    goals = np.array([[*(c - hand_gap * np.sign(c) * axis), *c] for c in CORNERS for axis in np.eye(2)])
     finals = [states[-1] for states, _, _, done in (run_episode(env, op, 600) for _ in range(8)) if done]
     env.close()
     on_goal = [bool((np.linalg.norm((goals - s).reshape(-1, 2, 2), axis=-1) < SUCCESS_TOL).all(axis=1).any())
                for s in finals]
     assert len(finals) >= 3 and np.mean(on_goal) >= 0.75, on_goal
+
+
+def test_expert_also_stops_in_open_space(env):
+    """Two evaluation goals lie in open space; the expert's goals must include such stops (a braked push that
+    rests away from every corner), else no expert frame shows one."""
+    op = ExpertReachGoal(env, np.random.default_rng(1), corner_share=0.0, rest=(40, 41))
+    for _ in range(2):
+        states, _, _, done = run_episode(env, op, 600)
+        assert done and np.linalg.norm(states[-1, 2:] - op.target) < SUCCESS_TOL
+        assert np.linalg.norm(states[-1, :2] - op.effector_goal) < SUCCESS_TOL
+        assert np.abs(op.target).min() < CORNER - 0.1, op.target  # not a corner
+        assert _frames_at_rest(states) >= 35
 
 
 def test_play_pauses_hold_still(env):

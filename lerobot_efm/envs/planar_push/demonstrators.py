@@ -72,6 +72,11 @@ SLIDE_TILT = 0.08  # a slide pushes this much into its wall (isotropic friction:
 # The operators send their command at most this far from the effector: the same motion, a determined action.
 CURSOR_REACH = 0.12
 PUSH_LOOKAHEAD = 0.35  # the disc is pushed at the farthest point of its grid path this far along it in sight
+# The paper's evaluation goals are last frames of held-out expert episodes, so the expert's goal distribution
+# contains them. Ours has 8 corner goals and 2 in open space (a band, the left passage); an expert that only ever
+# went to corners never showed a stop in open space (1 and 0 of 46,943 frames near those two goals).
+EXPERT_CORNER_SHARE = 0.75  # share of expert episodes aimed at a corner; the others at a random free spot
+OPEN_GOAL_HAND = 0.36  # an open-space goal's hand lies at most this far from its disc centre (contact: 0.275)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -234,15 +239,20 @@ def cursor(eff: np.ndarray, cmd: np.ndarray, reach: float | None = CURSOR_REACH)
 
 
 class ExpertReachGoal:
-    """Pushes the disc along a shortest path to a random corner at least ``min_path`` away (the paper's
-    "Expert reach goal"), the last stretch slid along one of the corner's walls as play does it (the hand then
-    ends where the corner evaluation goals have it); ``done`` once it rests there. With ``goal`` (4-D [eff, obj])
+    """Pushes the disc along a shortest path to a random goal at least ``min_path`` away (the paper's
+    "Expert reach goal"): a corner with probability ``corner_share``, its last stretch slid along one of the
+    corner's walls as play does it (the hand then ends where the corner evaluation goals have it), else a free
+    spot in open space where the disc is braked, then the hand is moved to a random spot beside it (open-space
+    goals name the hand too); ``done`` once both rest there. With ``goal`` (4-D [eff, obj])
     it keeps the env's current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
 
     def __init__(self, env, rng: np.random.Generator, goal=None, noise: float = 0.003, min_path: float = 0.8,
                  tolerance: float = 0.025, rest: tuple[int, int] = EXPERT_REST,
-                 cursor_reach: float | None = CURSOR_REACH):
+                 cursor_reach: float | None = CURSOR_REACH, corner_share: float = EXPERT_CORNER_SHARE):
         self.env, self.rng, self.noise, self.min_path, self.tol = env, rng, float(noise), float(min_path), tolerance
+        if not 0.0 <= corner_share <= 1.0:
+            raise ValueError(f"corner_share must be in [0, 1], got {corner_share!r}")
+        self.corner_share = float(corner_share)
         self.cursor_reach = cursor_reach
         self.fixed_goal = None if goal is None else np.asarray(goal, dtype=np.float64).reshape(4)
         self.rest = (int(rest[0]), int(rest[1]))
@@ -262,13 +272,17 @@ class ExpertReachGoal:
             self.effector_goal, self.target = self.fixed_goal[:2].copy(), self.fixed_goal[2:].copy()
             return self.env.observe()
         self.effector_goal = None
+        to_corner = self.rng.random() < self.corner_share
         for _ in range(100):
             obj = self.pusher.sample_disc(self.rng)
-            far = [c for c in CORNERS if self.pusher.path_length(obj, c) >= self.min_path]
+            goals = CORNERS if to_corner else [self.pusher.sample_disc(self.rng) for _ in range(4)]
+            far = [c for c in goals if self.pusher.path_length(obj, c) >= self.min_path]
             if far:
                 break
         self.target = far[self.rng.integers(len(far))].copy()
         self._via = self.pusher.corner_via(self.target, self.rng)
+        if not to_corner:  # an open-space goal names the hand too: placed beside the resting disc, as the eval's
+            self.effector_goal = self.pusher.sample_effector(self.rng, self.target, near=OPEN_GOAL_HAND)
         eff = self.pusher.sample_effector(self.rng, obj, near=0.6)
         self.env.set_state(np.concatenate([eff, obj]))
         return self.env.observe()
