@@ -78,6 +78,12 @@ class EFMConfig(PreTrainedConfig):
         rl_ramp_steps: after the warm-up the number of bootstrap rows grows linearly from 0 to the batch size
             over these updates (0 = all at once).
 
+    Deployment (a robot's observations carry no goal; :mod:`lerobot_efm.goal_source`):
+        goal_path: a goal file (safetensors of one observation's ``observation.*`` keys, ``lerobot-efm-goal``).
+        goal_dataset_root, goal_repo_id, goal_episode, goal_frame: or a frame of a LeRobot dataset (frame -1: the
+            episode's last). The goal is inserted into every observation that has none, e.g. under
+            ``lerobot-rollout --policy.path=CKPT --policy.goal_path=goal.safetensors``.
+
     Training:
         num_critics: critics trained side by side; every value uses their max (pessimistic for a distance).
         critic_loss_weight: weight of each critic's flow loss (reference: 0.1).
@@ -112,6 +118,12 @@ class EFMConfig(PreTrainedConfig):
     rl_goal_ratio: float = 0.3
     rl_warmup_steps: int = 0
     rl_ramp_steps: int = 0
+
+    goal_path: str | None = None
+    goal_dataset_root: str | None = None
+    goal_repo_id: str | None = None
+    goal_episode: int = 0
+    goal_frame: int = -1
 
     num_critics: int = 2
     critic_loss_weight: float = 0.1

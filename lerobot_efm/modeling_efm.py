@@ -18,6 +18,7 @@ from torch import Tensor
 from lerobot.policies.pretrained import PreTrainedPolicy
 
 from .agents import EFMAgent, make_agent
+from .goal_source import has_goal_source, load_goal, set_deploy_goal
 from .configuration_efm import (
     GOAL_DISTANCE_KEY,
     GOAL_PREFIX,
@@ -50,6 +51,8 @@ class EFMPolicy(PreTrainedPolicy):
         self.model: EFMAgent = make_agent(config, _normalized_rest_action(config, dataset_stats))
         self.ema_model: EFMAgent = copy.deepcopy(self.model).requires_grad_(False).eval()
         self.register_buffer("ema_updates", torch.zeros((), dtype=torch.long))
+        # deployment: the goal named by --policy.goal_* (none: clear any earlier policy's) for the pre-processor
+        set_deploy_goal(load_goal(config) if has_goal_source(config) else None)
         self.reset()
 
     # --- LeRobot API -------------------------------------------------------------------------------

@@ -14,6 +14,7 @@ from lerobot.processor import ObservationProcessorStep, PolicyAction, PolicyProc
 from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
 
 from .configuration_efm import GOAL_PREFIX, MIRROR_PREFIXES, EFMConfig, is_mirror_key, mirror_key
+from .goal_source import deploy_goal
 
 GOAL_BATCH_STEP = "efm_goal_batch_processor"
 
@@ -23,10 +24,21 @@ GOAL_BATCH_STEP = "efm_goal_batch_processor"
 class AddBatchDimensionToGoalsStep(ObservationProcessorStep):
     """Adds the batch dimension to the goal keys (``observation.goal.state``, ``observation.goal.images.*``),
     which LeRobot's batch step leaves alone: it only knows ``observation.state`` and ``observation.images.*``.
-    An unbatched robot observation then reaches the policy with its goal batched the same way."""
+    An unbatched robot observation then reaches the policy with its goal batched the same way.
+
+    A robot's observation has no goal at all: when the deployed policy was given one (``--policy.goal_path`` or
+    ``--policy.goal_dataset_root``, see :mod:`lerobot_efm.goal_source`), it is inserted here, before the device
+    step and the normaliser. The step is saved in every checkpoint's pipeline, so old checkpoints get it too."""
 
     def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
         observation = dict(observation)
+        goal = deploy_goal()
+        missing = [k for k in goal if k not in observation]
+        if missing:
+            batch = _batch_size(observation)
+            for key in missing:
+                value = goal[key]
+                observation[key] = value if batch is None else value.unsqueeze(0).expand(batch, *value.shape)
         for key, value in observation.items():
             if isinstance(value, torch.Tensor) and key.startswith(GOAL_PREFIX):
                 unbatched_rank = 3 if ".images." in key else 1
@@ -38,6 +50,16 @@ class AddBatchDimensionToGoalsStep(ObservationProcessorStep):
         self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
     ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
         return features
+
+
+def _batch_size(observation: dict[str, Any]) -> int | None:
+    """Batch size of a batched observation (from its state or first image), None when unbatched."""
+    for key, value in observation.items():
+        if isinstance(value, torch.Tensor) and key.startswith("observation.") and not key.startswith(GOAL_PREFIX):
+            rank = 3 if ".images." in key else 1
+            if key == "observation.state" or ".images." in key:
+                return int(value.shape[0]) if value.dim() == rank + 1 else None
+    return None
 
 
 def mirror_stats(stats: dict[str, dict[str, Any]] | None) -> dict[str, dict[str, Any]] | None:

@@ -1,0 +1,144 @@
+"""Where a deployed policy's goal comes from when the robot's observations carry none.
+
+LeRobot's deployment CLI (``lerobot-rollout``) hands the policy the robot's observation only; it knows nothing of
+goals. An ``efm_*`` policy is therefore told its goal at deploy time with ``--policy.goal_path=goal.safetensors``
+(a file written by ``lerobot-efm-goal``) or ``--policy.goal_dataset_root=DIR --policy.goal_episode=E
+--policy.goal_frame=F`` (a frame of a LeRobot dataset, video frames decoded by LeRobot's decoder). The goal is a
+plain observation (``observation.state``, ``observation.images.<cam>``); :func:`load_goal` turns it into the
+policy's goal keys (``observation.goal.*``), checked against the checkpoint's features, and the pre-processor's
+:class:`~lerobot_efm.processor_efm.AddBatchDimensionToGoalsStep` inserts it into every observation that lacks it,
+before normalisation (the policy itself sees only normalised inputs).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .configuration_efm import GOAL_PREFIX, OBS_PREFIX, is_mirror_key, mirror_key
+
+log = logging.getLogger(__name__)
+
+# The goal the pre-processor inserts into observations without one (goal key -> unbatched tensor). Deployment
+# CLIs rebuild the pre-processor from the checkpoint's JSON, so the saved step cannot receive the CLI's
+# --policy.goal_* values; the policy, built from the CLI-overridden config, sets the goal here instead.
+_deploy_goal: dict[str, torch.Tensor] = {}
+
+
+def set_deploy_goal(goal: dict[str, torch.Tensor] | None) -> None:
+    """Replace the goal inserted into goal-less observations (None or {} removes it)."""
+    _deploy_goal.clear()
+    _deploy_goal.update(goal or {})
+
+
+def deploy_goal() -> dict[str, torch.Tensor]:
+    return _deploy_goal
+
+
+def has_goal_source(config) -> bool:
+    return bool(getattr(config, "goal_path", None) or getattr(config, "goal_dataset_root", None))
+
+
+def read_goal_file(path: str | Path) -> dict[str, torch.Tensor]:
+    """A goal file: ``observation.*`` tensors of one observation (safetensors)."""
+    from safetensors.torch import load_file
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"goal file {path} does not exist (write one with lerobot-efm-goal)")
+    goal = load_file(str(path))
+    bad = [k for k in goal if not k.startswith(OBS_PREFIX) or is_mirror_key(k)]
+    if bad:
+        raise ValueError(f"goal file {path}: keys {bad} are not plain observation keys (observation.state, "
+                         f"observation.images.<camera>)")
+    return goal
+
+
+def write_goal_file(goal: dict[str, torch.Tensor], path: str | Path) -> Path:
+    """Save one observation (``observation.*`` tensors, unbatched) as a goal file."""
+    from safetensors.torch import save_file
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_file({k: v.detach().cpu().contiguous() for k, v in goal.items() if k.startswith(OBS_PREFIX)}, str(path))
+    return path
+
+
+def read_dataset_frame(root: str | Path, episode: int, frame: int, repo_id: str | None = None) -> dict[str, torch.Tensor]:
+    """The ``observation.*`` keys of frame ``frame`` (negative: from the end) of episode ``episode`` of the
+    LeRobot dataset at ``root``; video frames are decoded, only that one."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
+
+    root = Path(root)
+    if not (root / "meta" / "info.json").is_file():
+        raise FileNotFoundError(f"no LeRobot dataset at {root} (meta/info.json missing)")
+    repo_id = repo_id or f"local/{root.name}"
+    meta = LeRobotDatasetMetadata(repo_id, root=root)
+    if not 0 <= episode < meta.total_episodes:
+        raise ValueError(f"goal episode {episode} out of range: {root} has {meta.total_episodes} episodes")
+    ds = LeRobotDataset(repo_id, root=root, episodes=[episode])
+    n = len(ds)
+    if not -n <= frame < n:
+        raise ValueError(f"goal frame {frame} out of range: episode {episode} of {root} has {n} frames")
+    item = ds[frame % n]
+    return {k: v for k, v in item.items() if isinstance(v, torch.Tensor) and k.startswith(OBS_PREFIX)
+            and not is_mirror_key(k)}
+
+
+def _resize_image(img: torch.Tensor, key: str, shape: tuple[int, ...]) -> torch.Tensor:
+    import cv2
+
+    c, h, w = shape
+    log.warning("goal image %s is %s, the checkpoint expects %s: resized with OpenCV", key, tuple(img.shape),
+                tuple(shape))
+    hwc = img.permute(1, 2, 0).numpy().astype(np.float32)
+    out = cv2.resize(hwc, (w, h), interpolation=cv2.INTER_AREA)
+    return torch.from_numpy(out.reshape(h, w, c)).permute(2, 0, 1).contiguous()
+
+
+def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> dict[str, torch.Tensor]:
+    """Observation tensors -> the policy's goal keys, in the layout of LeRobot's inference input (float32,
+    images CHW in [0, 1]), checked against the features of the checkpoint (goal keys are in ``input_features``).
+
+    Raises with the key, the expected and the found shape when the goal does not fit the checkpoint."""
+    wanted = {k: tuple(f.shape) for k, f in input_features.items() if k.startswith(GOAL_PREFIX)}
+    if not wanted:
+        raise ValueError("this policy has no goal features (observation.goal.*) to fill")
+    goal = {}
+    for key, shape in wanted.items():
+        src = OBS_PREFIX + key[len(GOAL_PREFIX):]
+        if src not in observation:
+            raise KeyError(f"the goal lacks {src!r} (for {key!r}, shape {shape}); it has {sorted(observation)}")
+        value = torch.as_tensor(observation[src])
+        if ".images." in key:
+            if value.dim() == 3 and value.shape[-1] in (1, 3) and value.shape[0] not in (1, 3):  # HWC
+                value = value.permute(2, 0, 1)
+            value = value.float() / 255.0 if value.dtype == torch.uint8 else value.float()
+            if value.dim() != 3 or value.shape[0] != shape[0]:
+                raise ValueError(f"goal image {src!r} has shape {tuple(value.shape)}; the checkpoint expects "
+                                 f"{shape} (channels, height, width)")
+            if tuple(value.shape) != shape:
+                value = _resize_image(value, src, shape)
+        else:
+            value = value.float().reshape(-1) if value.dim() <= 1 else value.float()
+            if tuple(value.shape) != shape:
+                raise ValueError(f"goal {src!r} has shape {tuple(value.shape)}; the checkpoint expects {shape}")
+        goal[key] = value
+    return goal
+
+
+def load_goal(config) -> dict[str, torch.Tensor] | None:
+    """The goal named by the config's ``goal_*`` fields as goal-key tensors, or None when it names none."""
+    if getattr(config, "goal_path", None) and getattr(config, "goal_dataset_root", None):
+        raise ValueError("set either goal_path or goal_dataset_root, not both")
+    if getattr(config, "goal_path", None):
+        observation = read_goal_file(config.goal_path)
+    elif getattr(config, "goal_dataset_root", None):
+        observation = read_dataset_frame(config.goal_dataset_root, config.goal_episode, config.goal_frame,
+                                         config.goal_repo_id)
+    else:
+        return None
+    return to_goal_keys(observation, config.input_features)

@@ -1,0 +1,121 @@
+"""Deploy-time goals: a goal file (lerobot-efm-goal) or a dataset frame, named by --policy.goal_* flags, reaches
+goal-less robot observations through a checkpoint's saved pre-processor, as lerobot-rollout builds it."""
+
+import logging
+
+import pytest
+import torch
+from conftest import REPO_ID, tiny_config
+from safetensors.torch import save_file
+
+from lerobot.configs.policies import PreTrainedConfig
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.policies.factory import get_policy_class, make_policy, make_pre_post_processors
+from lerobot_efm.goal_source import deploy_goal, set_deploy_goal, to_goal_keys
+from lerobot_efm.hindsight import HindsightGoalDataset
+from lerobot_efm.scripts.goal import main as goal_cli
+
+
+@pytest.fixture(autouse=True)
+def _no_goal_left_behind():
+    yield
+    set_deploy_goal(None)
+
+
+def checkpoint(dataset, tmp_path):
+    """A saved efm_ac checkpoint (weights, config, pre/post-processors) as lerobot-train writes it."""
+    cfg = tiny_config("efm_ac")
+    wrapped = HindsightGoalDataset(dataset, cfg)
+    policy = make_policy(cfg, ds_meta=wrapped.meta)
+    pre, post = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
+    path = tmp_path / "pretrained_model"
+    policy.save_pretrained(path)
+    pre.save_pretrained(path)
+    post.save_pretrained(path)
+    return path
+
+
+def deploy(path, *flags):
+    """What lerobot-rollout does with --policy.path=PATH plus --policy.<flags>."""
+    cfg = PreTrainedConfig.from_pretrained(path, cli_overrides=list(flags))
+    policy = get_policy_class(cfg.type).from_pretrained(path, config=cfg).eval()
+    pre, post = make_pre_post_processors(cfg, pretrained_path=str(path),
+                                         preprocessor_overrides={"device_processor": {"device": "cpu"}})
+    return policy, pre, post
+
+
+def test_goal_file_from_a_dataset_frame_reaches_goal_less_observations(state_dataset, state_dataset_root, tmp_path):
+    path = checkpoint(state_dataset, tmp_path)
+    goal_file = goal_cli([f"--dataset.root={state_dataset_root}", f"--dataset.repo_id={REPO_ID}",
+                          "--dataset.episode=1", "--dataset.frame=-1", f"--output={tmp_path / 'goal.safetensors'}"])
+    episode = LeRobotDataset(REPO_ID, root=state_dataset_root, episodes=[1])
+    expected = episode[len(episode) - 1]["observation.state"]
+
+    policy, pre, post = deploy(path, f"--goal_path={goal_file}")
+    assert torch.equal(deploy_goal()["observation.goal.state"], expected)
+    robot = {"observation.state": torch.tensor([[0.1, -0.2]])}  # batched, as prepare_observation_for_inference
+    processed = pre(dict(robot))
+    reference = pre({**robot, "observation.goal.state": expected[None]})
+    assert torch.allclose(processed["observation.goal.state"], reference["observation.goal.state"])
+    assert post(policy.select_action(processed)).shape == (1, 2)
+    # a goal the observation brings (an env's) wins over the deploy-time one
+    own = torch.tensor([[0.5, 0.5]])
+    assert not torch.allclose(pre({**robot, "observation.goal.state": own})["observation.goal.state"],
+                              processed["observation.goal.state"])
+
+
+def test_goal_image_from_a_video_dataset_frame(video_dataset, video_dataset_root, tmp_path):
+    path = checkpoint(video_dataset, tmp_path)
+    policy, pre, _ = deploy(path, f"--goal_dataset_root={video_dataset_root}", f"--goal_repo_id={REPO_ID}",
+                            "--goal_episode=0", "--goal_frame=10")
+    frame = LeRobotDataset(REPO_ID, root=video_dataset_root, episodes=[0])[10]
+    robot = {"observation.state": torch.zeros(2, 2), "observation.images.top": torch.rand(2, 3, 32, 32)}
+    processed = pre(robot)
+    assert processed["observation.goal.images.top"].shape == (2, 3, 32, 32)
+    assert torch.allclose(processed["observation.goal.images.top"][1], frame["observation.images.top"])
+    assert torch.equal(processed["observation.goal.images.top"][0], processed["observation.goal.images.top"][1])
+    assert policy.select_action(processed).shape == (2, 2)
+
+
+def test_a_policy_without_goal_source_clears_an_earlier_goal(state_dataset, state_dataset_root, tmp_path):
+    path = checkpoint(state_dataset, tmp_path)
+    deploy(path, f"--goal_dataset_root={state_dataset_root}", f"--goal_repo_id={REPO_ID}")
+    assert deploy_goal()
+    deploy(path)
+    assert not deploy_goal()
+
+
+def test_bad_goals_are_refused_naming_the_key_and_shapes(state_dataset, state_dataset_root, tmp_path):
+    path = checkpoint(state_dataset, tmp_path)
+    wrong = tmp_path / "wrong.safetensors"
+    save_file({"observation.state": torch.zeros(3)}, str(wrong))
+    with pytest.raises(ValueError, match=r"'observation.state' has shape \(3,\); the checkpoint expects \(2,\)"):
+        deploy(path, f"--goal_path={wrong}")
+    other = tmp_path / "other.safetensors"
+    save_file({"observation.velocity": torch.zeros(2)}, str(other))
+    with pytest.raises(KeyError, match="lacks 'observation.state'"):
+        deploy(path, f"--goal_path={other}")
+    with pytest.raises(FileNotFoundError, match="missing.safetensors"):
+        deploy(path, f"--goal_path={tmp_path / 'missing.safetensors'}")
+    with pytest.raises(ValueError, match="goal episode 7 out of range.*3 episodes"):
+        deploy(path, f"--goal_dataset_root={state_dataset_root}", f"--goal_repo_id={REPO_ID}", "--goal_episode=7")
+
+
+def test_goal_image_of_another_resolution_is_resized_with_a_warning(caplog):
+    from lerobot.configs.types import FeatureType, PolicyFeature
+
+    features = {"observation.goal.images.top": PolicyFeature(FeatureType.VISUAL, (3, 32, 32))}
+    hwc = torch.randint(0, 256, (16, 16, 3), dtype=torch.uint8)  # a camera frame as a robot returns it
+    with caplog.at_level(logging.WARNING):
+        goal = to_goal_keys({"observation.images.top": hwc}, features)
+    image = goal["observation.goal.images.top"]
+    assert image.shape == (3, 32, 32) and 0.0 <= image.min() and image.max() <= 1.0
+    assert abs(float(image.mean()) - float(hwc.float().mean() / 255)) < 0.02
+    assert sum("resized" in r.message for r in caplog.records) == 1
+
+
+def test_goal_cli_shows_the_goal_in_rerun(video_dataset_root, tmp_path):
+    rrd = tmp_path / "goal.rrd"
+    goal_cli([f"--dataset.root={video_dataset_root}", f"--dataset.repo_id={REPO_ID}", "--dataset.frame=5",
+              f"--output={tmp_path / 'goal.safetensors'}", "--display=true", f"--rrd={rrd}"])
+    assert rrd.is_file() and rrd.stat().st_size > 32 * 32 * 3  # the goal image is in it
