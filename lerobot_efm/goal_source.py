@@ -141,4 +141,9 @@ def load_goal(config) -> dict[str, torch.Tensor] | None:
                                          config.goal_repo_id)
     else:
         return None
-    return to_goal_keys(observation, config.input_features)
+    goal = to_goal_keys(observation, config.input_features)
+    source = config.goal_path or f"{config.goal_dataset_root} episode {config.goal_episode} frame {config.goal_frame}"
+    states = {k: [round(float(x), 4) for x in v.reshape(-1)] for k, v in goal.items() if v.dim() == 1}
+    log.info("deploy goal from %s: %s%s", source, states, " + images " + str(sorted(set(goal) - set(states)))
+             if len(states) < len(goal) else "")
+    return goal

@@ -1,0 +1,66 @@
+"""The planar push simulator as a LeRobot Robot and the scripted play as a Teleoperator: LeRobot's own
+lerobot-record records play on it, lerobot-train trains on that recording, lerobot-efm-goal exports a goal and
+lerobot-rollout drives the simulated robot with the goal (a hardware-free dry run of a deployment)."""
+
+import numpy as np
+import pytest
+from test_lerobot_cli import TINY_FLAGS, run
+
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.robots.utils import make_robot_from_config
+from lerobot.teleoperators.utils import make_teleoperator_from_config
+from lerobot_efm.robots import ScriptedPlanarPushConfig, SimPlanarPushConfig
+from lerobot_efm.robots.sim_planar_push import ACTION_NAMES, STATE_NAMES
+
+
+def test_sim_robot_follows_commands_and_the_scripted_teleop_plays():
+    robot = make_robot_from_config(SimPlanarPushConfig(id="t1", image_size=16, start_pair=2))
+    teleop = make_teleoperator_from_config(ScriptedPlanarPushConfig(robot_id="t1"))
+    teleop.connect()  # before the robot, as lerobot-record does
+    robot.connect()
+    try:
+        obs = robot.get_observation()
+        assert list(obs) == [*STATE_NAMES, "top"] and obs["top"].shape == (16, 16, 3)
+        start = np.array([obs[k] for k in STATE_NAMES])
+        target = {"x.pos": start[0] + 0.1, "y.pos": start[1]}
+        for _ in range(10):
+            assert robot.send_action(target) == target
+        assert robot.get_observation()["eff_x.pos"] > start[0] + 0.05
+        moved = []
+        for _ in range(60):
+            action = teleop.get_action()
+            assert list(action) == list(ACTION_NAMES)
+            robot.send_action(action)
+            moved.append([robot.get_observation()[k] for k in STATE_NAMES])
+        assert np.ptp(np.array(moved)[:, :2], axis=0).max() > 0.05  # the operator moves the hand
+    finally:
+        robot.disconnect()
+    with pytest.raises(RuntimeError, match="no connected efm_sim_planar_push robot with id 't1'"):
+        teleop.get_action()
+
+
+def test_record_train_goal_rollout_with_lerobots_clis(tmp_path):
+    data, ckpt_dir, goal = tmp_path / "play", tmp_path / "train", tmp_path / "goal.safetensors"
+    run("lerobot-record", "--robot.type=efm_sim_planar_push", "--robot.id=sim", "--robot.image_size=32",
+        "--teleop.type=efm_scripted_planar_push", "--teleop.robot_id=sim", "--dataset.repo_id=local/sim_play",
+        f"--dataset.root={data}", "--dataset.single_task=play", "--dataset.fps=20", "--dataset.num_episodes=2",
+        "--dataset.episode_time_s=2", "--dataset.reset_time_s=0", "--dataset.push_to_hub=false",
+        "--play_sounds=false")
+    recorded = LeRobotDataset("local/sim_play", root=data)
+    assert recorded.meta.total_episodes == 2 and recorded.meta.features["observation.state"]["names"] == list(STATE_NAMES)
+    states = np.stack(recorded.hf_dataset["observation.state"])
+    assert np.ptp(states[:, :2], axis=0).max() > 0.05
+
+    run("lerobot-train", "--policy.type=efm_ac", "--dataset.repo_id=local/sim_play", f"--dataset.root={data}",
+        f"--output_dir={ckpt_dir}", *TINY_FLAGS, "--policy.image_encoder_channels=[4,8,8]",
+        "--policy.image_encoder_hidden_dim=16", "--policy.image_latent_dim=8", "--steps=4", "--save_freq=4")
+    run("lerobot-efm-goal", f"--dataset.root={data}", "--dataset.repo_id=local/sim_play", "--dataset.episode=1",
+        f"--output={goal}")
+    proc = run("lerobot-rollout", "--strategy.type=base", f"--policy.path={ckpt_dir}/checkpoints/last/pretrained_model",
+               f"--policy.goal_path={goal}", "--policy.device=cpu", "--robot.type=efm_sim_planar_push",
+               "--robot.id=sim", "--robot.image_size=32", "--duration=2", "--fps=20", "--play_sounds=false")
+    episode = LeRobotDataset("local/sim_play", root=data, episodes=[1])
+    last = [round(float(x), 4) for x in episode[len(episode) - 1]["observation.state"]]
+    log = proc.stdout + proc.stderr
+    assert "deploy goal from" in log and str(last) in log, log[-3000:]
+    assert "Rollout finished" in log
