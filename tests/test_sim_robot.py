@@ -64,3 +64,21 @@ def test_record_train_goal_rollout_with_lerobots_clis(tmp_path):
     log = proc.stdout + proc.stderr
     assert "deploy goal from" in log and str(last) in log, log[-3000:]
     assert "Rollout finished" in log
+
+
+def test_goal_captured_from_a_live_robot(tmp_path):
+    """lerobot-efm-goal --robot.type=...: the teleoperator moves the robot, the observation after it is the goal,
+    named as lerobot-record names the robot's features."""
+    import torch
+    from safetensors.torch import load_file
+
+    from lerobot_efm.scripts.goal import main as goal_cli
+
+    path = goal_cli(["--robot.type=efm_sim_planar_push", "--robot.id=g", "--robot.image_size=32",
+                     "--teleop.type=efm_scripted_planar_push", "--teleop.robot_id=g", "--fps=200",
+                     "--capture_after_s=0.5", f"--output={tmp_path / 'goal.safetensors'}"])
+    goal = load_file(str(path))
+    assert set(goal) == {"observation.state", "observation.images.top"}
+    assert goal["observation.images.top"].shape == (3, 32, 32) and goal["observation.images.top"].max() <= 1.0
+    start = torch.tensor([0.15, -0.5, 0.5, -0.5])  # evaluation pair 0's start, where the robot connects
+    assert (goal["observation.state"] - start)[:2].abs().max() > 0.02  # the teleoperator moved the hand

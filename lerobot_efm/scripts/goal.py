@@ -1,17 +1,28 @@
-"""``lerobot-efm-goal``: export a goal observation from a frame of a LeRobot dataset into a goal file.
+"""``lerobot-efm-goal``: save a goal observation (a frame of a LeRobot dataset, or a live robot's) to a goal file.
 
     lerobot-efm-goal --dataset.root=data/my_play --dataset.episode=3 --dataset.frame=-1 --output=goal.safetensors
+    lerobot-efm-goal --robot.type=so101_follower --robot.port=... --teleop.type=so101_leader --output=goal.safetensors
 
-The file holds the frame's ``observation.*`` tensors (state, decoded camera images); deploy with
+From a robot: it connects (and the teleoperator, if given, which then moves the robot), lets you bring the robot
+to the goal (by teleoperation or by hand) until you press Enter (or for ``--capture_after_s``), and saves that
+observation, named as ``lerobot-record`` names it (``observation.state`` from the robot's ``.pos``/``.vel``
+scalars in order, ``observation.images.<camera>``).
+
+The file holds the ``observation.*`` tensors (state, camera images as float CHW in [0, 1]); deploy with
 ``lerobot-rollout --policy.path=CKPT --policy.goal_path=goal.safetensors`` (see :mod:`lerobot_efm.goal_source`).
 ``--display=true`` also logs the goal to rerun (``--rrd=goal.rrd`` saves it to a file instead of a viewer).
 """
 
 import logging
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import torch
+
 from lerobot.configs import parser
+from lerobot.robots import RobotConfig
+from lerobot.teleoperators import TeleoperatorConfig
 
 from lerobot_efm.goal_source import read_dataset_frame, write_goal_file
 from lerobot_efm.scripts import run_cli
@@ -28,6 +39,10 @@ class GoalFrameConfig:
 @dataclass
 class GoalConfig:
     dataset: GoalFrameConfig = field(default_factory=GoalFrameConfig)
+    robot: RobotConfig | None = None  # capture the goal from this robot instead of a dataset
+    teleop: TeleoperatorConfig | None = None  # moves the robot to the goal while capturing
+    fps: int = 30  # teleoperation rate while waiting
+    capture_after_s: float | None = None  # capture after this many seconds instead of waiting for Enter
     output: Path = Path("goal.safetensors")
     display: bool = False  # log the goal's state and images to rerun
     rrd: Path | None = None  # with --display: save the rerun recording here instead of spawning a viewer
@@ -66,14 +81,60 @@ def display(goal: dict, rrd: Path | None) -> None:
         rec.disconnect()
 
 
+def capture_from_robot(cfg: GoalConfig) -> dict:
+    """Connect, let the user bring the robot to the goal, return its observation as policy input tensors."""
+    import select
+    import sys
+
+    from lerobot.robots.utils import make_robot_from_config
+    from lerobot.teleoperators.utils import make_teleoperator_from_config
+    from lerobot.utils.feature_utils import build_dataset_frame, hw_to_dataset_features
+
+    robot = make_robot_from_config(cfg.robot)
+    teleop = make_teleoperator_from_config(cfg.teleop) if cfg.teleop is not None else None
+    if teleop is not None:
+        teleop.connect()
+    robot.connect()
+    try:
+        if cfg.capture_after_s is None:
+            print("Bring the robot to the goal, then press Enter.", flush=True)
+        start = time.perf_counter()
+        while True:
+            if teleop is not None:
+                robot.send_action(teleop.get_action())
+            if cfg.capture_after_s is not None:
+                if time.perf_counter() - start >= cfg.capture_after_s:
+                    break
+            elif select.select([sys.stdin], [], [], 0)[0]:
+                sys.stdin.readline()
+                break
+            time.sleep(1.0 / cfg.fps)
+        raw = robot.get_observation()
+        features = hw_to_dataset_features(robot.observation_features, "observation")
+        frame = build_dataset_frame(features, raw, "observation")
+    finally:
+        robot.disconnect()
+        if teleop is not None:
+            teleop.disconnect()
+    goal = {}
+    for key, value in frame.items():
+        t = torch.as_tensor(value)
+        goal[key] = t.permute(2, 0, 1).float() / 255.0 if t.dim() == 3 else t.float()
+    return goal
+
+
 @parser.wrap()
 def export_goal(cfg: GoalConfig) -> Path:
-    if cfg.dataset.root is None:
-        raise ValueError("--dataset.root is required: the LeRobot dataset to take the goal frame from")
-    goal = read_dataset_frame(cfg.dataset.root, cfg.dataset.episode, cfg.dataset.frame, cfg.dataset.repo_id)
+    if cfg.robot is not None:
+        goal = capture_from_robot(cfg)
+        source = f"robot {cfg.robot.type}"
+    elif cfg.dataset.root is not None:
+        goal = read_dataset_frame(cfg.dataset.root, cfg.dataset.episode, cfg.dataset.frame, cfg.dataset.repo_id)
+        source = f"episode {cfg.dataset.episode}, frame {cfg.dataset.frame} of {cfg.dataset.root}"
+    else:
+        raise ValueError("give --dataset.root (a LeRobot dataset frame) or --robot.type (a live robot)")
     path = write_goal_file(goal, cfg.output)
-    logging.info("goal: episode %d, frame %d of %s -> %s\n%s", cfg.dataset.episode, cfg.dataset.frame,
-                 cfg.dataset.root, path, describe(goal))
+    logging.info("goal: %s -> %s\n%s", source, path, describe(goal))
     if cfg.display:
         display(goal, cfg.rrd)
     return path
