@@ -83,6 +83,8 @@ class EFMConfig(PreTrainedConfig):
         goal_dataset_root, goal_repo_id, goal_episode, goal_frame: or a frame of a LeRobot dataset (frame -1: the
             episode's last). The goal is inserted into every observation that has none, e.g. under
             ``lerobot-rollout --policy.path=CKPT --policy.goal_path=goal.safetensors``.
+            ``goal_path`` may list several files, comma-separated: a multi-step task, each goal kept until
+        goal_advance_distance: the critic's distance to it (in steps) falls under this; then the next one.
 
     Training:
         num_critics: critics trained side by side; every value uses their max (pessimistic for a distance).
@@ -124,6 +126,7 @@ class EFMConfig(PreTrainedConfig):
     goal_repo_id: str | None = None
     goal_episode: int = 0
     goal_frame: int = -1
+    goal_advance_distance: float = 10.0
 
     num_critics: int = 2
     critic_loss_weight: float = 0.1
@@ -193,6 +196,7 @@ class EFMConfig(PreTrainedConfig):
             "rl_warmup_steps": self.rl_warmup_steps >= 0,
             "rl_ramp_steps": self.rl_ramp_steps >= 0,
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
+            "goal_advance_distance": self.goal_advance_distance >= 0.0,
             "n_action_steps": 1 <= self.n_action_steps <= (self.action_traj_len - 1) * self.action_traj_stride + 1,
         }
         bad = [name for name, ok in checks.items() if not ok]

@@ -22,20 +22,60 @@ from .configuration_efm import GOAL_PREFIX, OBS_PREFIX, is_mirror_key, mirror_ke
 
 log = logging.getLogger(__name__)
 
-# The goal the pre-processor inserts into observations without one (goal key -> unbatched tensor). Deployment
-# CLIs rebuild the pre-processor from the checkpoint's JSON, so the saved step cannot receive the CLI's
-# --policy.goal_* values; the policy, built from the CLI-overridden config, sets the goal here instead.
-_deploy_goal: dict[str, torch.Tensor] = {}
+# The goals the pre-processor inserts into observations without one (goal key -> unbatched tensor), in order,
+# and which one is current. Deployment CLIs rebuild the pre-processor from the checkpoint's JSON, so the saved
+# step cannot receive the CLI's --policy.goal_* values; the policy, built from the CLI-overridden config, sets
+# the goals here instead, and advances them when its critic says the current one is reached.
+_deploy = {"goals": [], "index": 0, "image_shapes": {}, "warned": set()}
 
 
-def set_deploy_goal(goal: dict[str, torch.Tensor] | None) -> None:
-    """Replace the goal inserted into goal-less observations (None or {} removes it)."""
-    _deploy_goal.clear()
-    _deploy_goal.update(goal or {})
+def set_deploy_goal(goal: dict[str, torch.Tensor] | list[dict[str, torch.Tensor]] | None) -> None:
+    """Replace the goal (or the sequence of goals) inserted into goal-less observations (None removes it)."""
+    goals = [] if not goal else [goal] if isinstance(goal, dict) else list(goal)
+    _deploy["goals"], _deploy["index"] = goals, 0
+
+
+def set_image_shapes(shapes: dict[str, tuple[int, ...]]) -> None:
+    """The (C, H, W) the policy's cameras were trained at: live frames of another size are resized to them."""
+    _deploy["image_shapes"], _deploy["warned"] = dict(shapes), set()
+
+
+def fit_live_images(observation: dict) -> dict:
+    """Resize camera frames (``observation.images.*``, (C, H, W) or (B, C, H, W) floats) whose size differs from
+    the checkpoint's (a robot camera set to another resolution than the recording's), warning once per camera."""
+    for key, shape in _deploy["image_shapes"].items():
+        value = observation.get(key)
+        if not isinstance(value, torch.Tensor) or tuple(value.shape[-2:]) == tuple(shape[-2:]):
+            continue
+        if key not in _deploy["warned"]:
+            log.warning("camera %s sends %s frames, the checkpoint was trained on %s: resized with OpenCV", key,
+                        tuple(value.shape[-3:]), tuple(shape))
+            _deploy["warned"].add(key)
+        frames = value.reshape(-1, *value.shape[-3:]).cpu()
+        resized = torch.stack([_resize(f, shape) for f in frames])
+        observation[key] = resized.reshape(*value.shape[:-3], *shape).to(value.device)
+    return observation
 
 
 def deploy_goal() -> dict[str, torch.Tensor]:
-    return _deploy_goal
+    """The current deploy-time goal ({} when none)."""
+    goals = _deploy["goals"]
+    return goals[_deploy["index"]] if goals else {}
+
+
+def deploy_goal_index() -> int:
+    return int(_deploy["index"])
+
+
+def advance_deploy_goal(distance_steps: float, threshold: float) -> bool:
+    """Move on to the next goal of the sequence once the critic's distance to the current one is under
+    ``threshold`` steps; True when it advanced."""
+    if _deploy["index"] + 1 >= len(_deploy["goals"]) or distance_steps >= threshold:
+        return False
+    _deploy["index"] += 1
+    log.info("goal %d reached (critic distance %.1f steps < %.1f): now goal %d of %d", _deploy["index"] - 1,
+             distance_steps, threshold, _deploy["index"], len(_deploy["goals"]))
+    return True
 
 
 def has_goal_source(config) -> bool:
@@ -88,15 +128,21 @@ def read_dataset_frame(root: str | Path, episode: int, frame: int, repo_id: str 
             and not is_mirror_key(k)}
 
 
-def _resize_image(img: torch.Tensor, key: str, shape: tuple[int, ...]) -> torch.Tensor:
+def _resize(img: torch.Tensor, shape: tuple[int, ...]) -> torch.Tensor:
+    """(C, H, W) float image -> ``shape`` with OpenCV (area interpolation when shrinking)."""
     import cv2
 
     c, h, w = shape
+    hwc = img.permute(1, 2, 0).numpy().astype(np.float32)
+    shrink = h * w < hwc.shape[0] * hwc.shape[1]
+    out = cv2.resize(hwc, (w, h), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    return torch.from_numpy(out.reshape(h, w, c)).permute(2, 0, 1).contiguous()
+
+
+def _resize_image(img: torch.Tensor, key: str, shape: tuple[int, ...]) -> torch.Tensor:
     log.warning("goal image %s is %s, the checkpoint expects %s: resized with OpenCV", key, tuple(img.shape),
                 tuple(shape))
-    hwc = img.permute(1, 2, 0).numpy().astype(np.float32)
-    out = cv2.resize(hwc, (w, h), interpolation=cv2.INTER_AREA)
-    return torch.from_numpy(out.reshape(h, w, c)).permute(2, 0, 1).contiguous()
+    return _resize(img, shape)
 
 
 def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> dict[str, torch.Tensor]:
@@ -130,20 +176,24 @@ def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> 
     return goal
 
 
-def load_goal(config) -> dict[str, torch.Tensor] | None:
-    """The goal named by the config's ``goal_*`` fields as goal-key tensors, or None when it names none."""
+def load_goals(config) -> list[dict[str, torch.Tensor]] | None:
+    """The goals named by the config's ``goal_*`` fields as goal-key tensors, or None when it names none.
+
+    ``goal_path`` may list several files separated by commas (a multi-step task), ``goal_frame`` one frame."""
     if getattr(config, "goal_path", None) and getattr(config, "goal_dataset_root", None):
         raise ValueError("set either goal_path or goal_dataset_root, not both")
     if getattr(config, "goal_path", None):
-        observation = read_goal_file(config.goal_path)
+        sources = [p.strip() for p in config.goal_path.split(",") if p.strip()]
+        observations = [read_goal_file(p) for p in sources]
     elif getattr(config, "goal_dataset_root", None):
-        observation = read_dataset_frame(config.goal_dataset_root, config.goal_episode, config.goal_frame,
-                                         config.goal_repo_id)
+        sources = [f"{config.goal_dataset_root} episode {config.goal_episode} frame {config.goal_frame}"]
+        observations = [read_dataset_frame(config.goal_dataset_root, config.goal_episode, config.goal_frame,
+                                           config.goal_repo_id)]
     else:
         return None
-    goal = to_goal_keys(observation, config.input_features)
-    source = config.goal_path or f"{config.goal_dataset_root} episode {config.goal_episode} frame {config.goal_frame}"
-    states = {k: [round(float(x), 4) for x in v.reshape(-1)] for k, v in goal.items() if v.dim() == 1}
-    log.info("deploy goal from %s: %s%s", source, states, " + images " + str(sorted(set(goal) - set(states)))
-             if len(states) < len(goal) else "")
-    return goal
+    goals = [to_goal_keys(o, config.input_features) for o in observations]
+    for source, goal in zip(sources, goals, strict=True):
+        states = {k: [round(float(x), 4) for x in v.reshape(-1)] for k, v in goal.items() if v.dim() == 1}
+        log.info("deploy goal from %s: %s%s", source, states, " + images " + str(sorted(set(goal) - set(states)))
+                 if len(states) < len(goal) else "")
+    return goals

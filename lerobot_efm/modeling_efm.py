@@ -18,7 +18,7 @@ from torch import Tensor
 from lerobot.policies.pretrained import PreTrainedPolicy
 
 from .agents import EFMAgent, make_agent
-from .goal_source import has_goal_source, load_goal, set_deploy_goal
+from .goal_source import advance_deploy_goal, has_goal_source, load_goals, set_deploy_goal, set_image_shapes
 from .configuration_efm import (
     GOAL_DISTANCE_KEY,
     GOAL_PREFIX,
@@ -52,7 +52,12 @@ class EFMPolicy(PreTrainedPolicy):
         self.ema_model: EFMAgent = copy.deepcopy(self.model).requires_grad_(False).eval()
         self.register_buffer("ema_updates", torch.zeros((), dtype=torch.long))
         # deployment: the goal named by --policy.goal_* (none: clear any earlier policy's) for the pre-processor
-        set_deploy_goal(load_goal(config) if has_goal_source(config) else None)
+        goals = load_goals(config) if has_goal_source(config) else None
+        if goals and len(goals) > 1 and not config.uses_critic:
+            raise ValueError(f"a sequence of {len(goals)} goals advances on the critic's distance; "
+                             f"{config.type} has no critic")
+        set_deploy_goal(goals)
+        set_image_shapes({k: tuple(ft.shape) for k, ft in config.observation_features.items() if ".images." in k})
         self.reset()
 
     # --- LeRobot API -------------------------------------------------------------------------------
@@ -88,11 +93,18 @@ class EFMPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor]) -> Tensor:
-        """Receding horizon: execute ``n_action_steps`` control steps of the chunk, then replan."""
+        """Receding horizon: execute ``n_action_steps`` control steps of the chunk, then replan.
+
+        With a sequence of deploy-time goals, a critic distance under ``goal_advance_distance`` moves on to the
+        next goal: one step of this chunk is executed, then the policy replans towards the new goal."""
         if not self._action_queue:
             chunk = self.predict_action_chunk(batch)
             steps = _to_control_rate(chunk, self.config.action_traj_stride, self.config.action_mode)
-            self._action_queue.extend(steps[:, : self.config.n_action_steps].transpose(0, 1))
+            n = self.config.n_action_steps
+            distance = self.last_prediction.get("distance")
+            if distance is not None and advance_deploy_goal(float(distance.max()), self.config.goal_advance_distance):
+                n = 1
+            self._action_queue.extend(steps[:, :n].transpose(0, 1))
         return self._action_queue.popleft()
 
     @torch.no_grad()

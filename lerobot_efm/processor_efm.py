@@ -14,7 +14,7 @@ from lerobot.processor import ObservationProcessorStep, PolicyAction, PolicyProc
 from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
 
 from .configuration_efm import GOAL_PREFIX, MIRROR_PREFIXES, EFMConfig, is_mirror_key, mirror_key
-from .goal_source import deploy_goal
+from .goal_source import deploy_goal, fit_live_images
 
 GOAL_BATCH_STEP = "efm_goal_batch_processor"
 
@@ -28,10 +28,11 @@ class AddBatchDimensionToGoalsStep(ObservationProcessorStep):
 
     A robot's observation has no goal at all: when the deployed policy was given one (``--policy.goal_path`` or
     ``--policy.goal_dataset_root``, see :mod:`lerobot_efm.goal_source`), it is inserted here, before the device
-    step and the normaliser. The step is saved in every checkpoint's pipeline, so old checkpoints get it too."""
+    step and the normaliser, and camera frames of another resolution than the checkpoint's are resized. The step
+    is saved in every checkpoint's pipeline, so old checkpoints get both too."""
 
     def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
-        observation = dict(observation)
+        observation = fit_live_images(dict(observation))
         goal = deploy_goal()
         missing = [k for k in goal if k not in observation]
         if missing:

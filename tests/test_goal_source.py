@@ -119,3 +119,56 @@ def test_goal_cli_shows_the_goal_in_rerun(video_dataset_root, tmp_path):
     goal_cli([f"--dataset.root={video_dataset_root}", f"--dataset.repo_id={REPO_ID}", "--dataset.frame=5",
               f"--output={tmp_path / 'goal.safetensors'}", "--display=true", f"--rrd={rrd}"])
     assert rrd.is_file() and rrd.stat().st_size > 32 * 32 * 3  # the goal image is in it
+
+
+def test_a_sequence_of_goals_advances_when_the_critic_says_reached(state_dataset, tmp_path):
+    """goal_path=a,b: goal a is inserted until the critic's distance to it falls under goal_advance_distance,
+    then goal b (a multi-step task); one step of the last chunk is executed before replanning."""
+    from lerobot_efm.goal_source import deploy_goal_index
+
+    path = checkpoint(state_dataset, tmp_path)
+    first, second = tmp_path / "a.safetensors", tmp_path / "b.safetensors"
+    save_file({"observation.state": torch.tensor([0.2, 0.2])}, str(first))
+    save_file({"observation.state": torch.tensor([-0.3, 0.1])}, str(second))
+    policy, pre, _ = deploy(path, f"--goal_path={first},{second}", "--goal_advance_distance=5")
+    policy.config.goal_advance_distance = -1e6  # an untrained critic's distance may be anything: never reached
+    robot = {"observation.state": torch.tensor([[0.0, 0.0]])}
+    goal_a = pre(dict(robot))["observation.goal.state"]
+    for _ in range(3 * policy.config.n_action_steps):  # stays on goal a
+        policy.select_action(pre(dict(robot)))
+    assert deploy_goal_index() == 0 and len(policy._action_queue) < policy.config.n_action_steps
+
+    policy.config.goal_advance_distance = 1e6  # any distance counts as reached now
+    policy.reset()
+    policy.select_action(pre(dict(robot)))
+    assert deploy_goal_index() == 1 and len(policy._action_queue) == 0  # replans at the next step
+    goal_b = pre(dict(robot))["observation.goal.state"]
+    assert not torch.allclose(goal_a, goal_b)
+    policy.reset()
+    policy.select_action(pre(dict(robot)))
+    assert deploy_goal_index() == 1  # the last goal stays
+
+
+def test_a_goal_sequence_needs_a_critic(state_dataset, tmp_path):
+    cfg = tiny_config("efm_gc")
+    wrapped = HindsightGoalDataset(state_dataset, cfg)
+    policy = make_policy(cfg, ds_meta=wrapped.meta)
+    policy.save_pretrained(tmp_path / "gc")
+    goal = tmp_path / "g.safetensors"
+    save_file({"observation.state": torch.tensor([0.2, 0.2])}, str(goal))
+    cfg = PreTrainedConfig.from_pretrained(tmp_path / "gc", cli_overrides=[f"--goal_path={goal},{goal}"])
+    with pytest.raises(ValueError, match="sequence of 2 goals.*efm_gc has no critic"):
+        get_policy_class("efm_gc").from_pretrained(tmp_path / "gc", config=cfg)
+
+
+def test_live_camera_frames_of_another_resolution_are_resized_once_warned(video_dataset, tmp_path, caplog):
+    path = checkpoint(video_dataset, tmp_path)
+    policy, pre, _ = deploy(path)
+    goal = torch.rand(1, 3, 32, 32)
+    with caplog.at_level(logging.WARNING):
+        for _ in range(2):
+            processed = pre({"observation.state": torch.zeros(1, 2), "observation.images.top": torch.rand(1, 3, 48, 64),
+                             "observation.goal.images.top": goal, "observation.goal.state": torch.zeros(1, 2)})
+    assert processed["observation.images.top"].shape == (1, 3, 32, 32)
+    assert sum("sends (3, 48, 64) frames" in r.message for r in caplog.records) == 1
+    assert policy.select_action(processed).shape == (1, 2)
