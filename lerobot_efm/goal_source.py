@@ -4,7 +4,7 @@ LeRobot's deployment CLI (``lerobot-rollout``) hands the policy the robot's obse
 goals. An ``efm_*`` policy is therefore told its goal at deploy time with ``--policy.goal_path=goal.safetensors``
 (a file written by ``lerobot-efm-goal``) or ``--policy.goal_dataset_root=DIR --policy.goal_episode=E
 --policy.goal_frame=F`` (a frame of a LeRobot dataset, video frames decoded by LeRobot's decoder). The goal is a
-plain observation (``observation.state``, ``observation.images.<cam>``); :func:`load_goal` turns it into the
+plain observation (``observation.state``, ``observation.images.<cam>``); :func:`load_goals` turns it into the
 policy's goal keys (``observation.goal.*``), checked against the checkpoint's features, and the pre-processor's
 :class:`~lerobot_efm.processor_efm.AddBatchDimensionToGoalsStep` inserts it into every observation that lacks it,
 before normalisation (the policy itself sees only normalised inputs).
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .configuration_efm import GOAL_PREFIX, OBS_PREFIX, is_mirror_key, mirror_key
+from .configuration_efm import GOAL_PREFIX, OBS_PREFIX, is_mirror_key
 
 log = logging.getLogger(__name__)
 
