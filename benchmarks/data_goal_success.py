@@ -112,7 +112,9 @@ def evaluate(checkpoint: Path, pairs, max_steps: int, device: str, overrides: di
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--checkpoint", type=Path, required=True)
-    p.add_argument("--dataset", type=Path, required=True)
+    p.add_argument("--dataset", type=Path, help="the training recording to draw (start, goal) pairs from")
+    p.add_argument("--eval-pairs", type=int, default=0, metavar="REPS",
+                   help="instead of data goals: the 10 evaluation pairs, REPS episodes each (a re-check of lerobot-eval)")
     p.add_argument("--episodes", type=int, default=50)
     p.add_argument("--max-steps", type=int, default=600)
     p.add_argument("--seed", type=int, default=0)
@@ -121,8 +123,15 @@ def main() -> None:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override a config field at inference, e.g. critic_inference_eps=0.5")
     a = p.parse_args()
-    states, episodes = load_states(a.dataset)
-    pairs = sample_pairs(states, episodes, a.episodes, np.random.default_rng(a.seed))
+    if a.eval_pairs > 0:
+        from lerobot_efm.envs.planar_push.env import EVAL_PAIRS
+
+        pairs = [(initial, goal) for _, initial, goal in EVAL_PAIRS for _ in range(a.eval_pairs)]
+    elif a.dataset is None:
+        p.error("give --dataset (goals from the recording) or --eval-pairs REPS")
+    else:
+        states, episodes = load_states(a.dataset)
+        pairs = sample_pairs(states, episodes, a.episodes, np.random.default_rng(a.seed))
     overrides = dict(x.split("=", 1) for x in a.set)
     result = {"checkpoint": str(a.checkpoint), "dataset": str(a.dataset),
               **evaluate(a.checkpoint, pairs, a.max_steps, a.device, overrides)}
