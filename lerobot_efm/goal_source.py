@@ -139,12 +139,6 @@ def _resize(img: torch.Tensor, shape: tuple[int, ...]) -> torch.Tensor:
     return torch.from_numpy(out.reshape(h, w, c)).permute(2, 0, 1).contiguous()
 
 
-def _resize_image(img: torch.Tensor, key: str, shape: tuple[int, ...]) -> torch.Tensor:
-    log.warning("goal image %s is %s, the checkpoint expects %s: resized with OpenCV", key, tuple(img.shape),
-                tuple(shape))
-    return _resize(img, shape)
-
-
 def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> dict[str, torch.Tensor]:
     """Observation tensors -> the policy's goal keys, in the layout of LeRobot's inference input (float32,
     images CHW in [0, 1]), checked against the features of the checkpoint (goal keys are in ``input_features``).
@@ -167,7 +161,9 @@ def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> 
                 raise ValueError(f"goal image {src!r} has shape {tuple(value.shape)}; the checkpoint expects "
                                  f"{shape} (channels, height, width)")
             if tuple(value.shape) != shape:
-                value = _resize_image(value, src, shape)
+                log.warning("goal image %s is %s, the checkpoint expects %s: resized with OpenCV", src,
+                            tuple(value.shape), shape)
+                value = _resize(value, shape)
         else:
             value = value.float().reshape(-1) if value.dim() <= 1 else value.float()
             if tuple(value.shape) != shape:

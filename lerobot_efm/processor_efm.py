@@ -41,10 +41,8 @@ class AddBatchDimensionToGoalsStep(ObservationProcessorStep):
                 value = goal[key]
                 observation[key] = value if batch is None else value.unsqueeze(0).expand(batch, *value.shape)
         for key, value in observation.items():
-            if isinstance(value, torch.Tensor) and key.startswith(GOAL_PREFIX):
-                unbatched_rank = 3 if ".images." in key else 1
-                if value.dim() == unbatched_rank:
-                    observation[key] = value.unsqueeze(0)
+            if isinstance(value, torch.Tensor) and key.startswith(GOAL_PREFIX) and value.dim() == _unbatched_rank(key):
+                observation[key] = value.unsqueeze(0)
         return observation
 
     def transform_features(
@@ -53,13 +51,15 @@ class AddBatchDimensionToGoalsStep(ObservationProcessorStep):
         return features
 
 
+def _unbatched_rank(key: str) -> int:
+    return 3 if ".images." in key else 1  # (C, H, W) images, (D,) vectors
+
+
 def _batch_size(observation: dict[str, Any]) -> int | None:
     """Batch size of a batched observation (from its state or first image), None when unbatched."""
     for key, value in observation.items():
-        if isinstance(value, torch.Tensor) and key.startswith("observation.") and not key.startswith(GOAL_PREFIX):
-            rank = 3 if ".images." in key else 1
-            if key == "observation.state" or ".images." in key:
-                return int(value.shape[0]) if value.dim() == rank + 1 else None
+        if key == "observation.state" or key.startswith("observation.images."):
+            return int(value.shape[0]) if value.dim() == _unbatched_rank(key) + 1 else None
     return None
 
 
