@@ -51,9 +51,30 @@ PLAY_REST = (20, 100)  # frames of a play pause (after a disc leg with probabili
 PLAY_REST_AFTER_DISC = 0.5
 # Humans push the disc against walls and into corners too (nothing stops it there); without such legs no
 # play frame has the disc within 0.04 of 8 of the 10 evaluation goals (corners), which no agent can then reach.
-PLAY_WALL_TARGETS = 0.5  # share of disc legs aimed at a wall-adjacent spot (half of them a corner), stopped on
+PLAY_WALL_TARGETS = 0.5  # share of the other disc legs aimed at a wall-adjacent spot, stopped on
 WALL_BAND = 0.06  # a wall-adjacent target's disc lies within this of its closest allowed distance to a wall
 REST_NOISE = 0.002  # a resting hand's tremor on the command
+# Push speed is very sensitive to the lead: the disc's net force is 50 * lead - 2 (friction), 3 at lead 0.1 and 1
+# at 0.06. Humans push at the force clip (their action lead, 0.083 on average, includes every slower phase); play
+# pushing at U(0.06, 0.1) moved the disc at 0.27 /s against the expert's 0.41 /s, so the fastest routes between
+# two play states were slow and the critic's minimum distance with them.
+PLAY_MIN_LEAD = 0.09
+# Humans keep the hand around the disc between pushes; wandering to any point of the maze (as before) added
+# long effector-only stretches that no goal reached by pushing needs.
+PLAY_EFFECTOR_NEAR: float | None = 0.6
+# A hand's noise is smooth; i.i.d. noise on every command is jitter the actor has to model as such (0.01 before).
+PLAY_NOISE = 0.005
+# A disc pushed into a corner rests against both walls and no push can get it out (no room behind it): play that
+# went on after a corner flailed around the wedged disc for the rest of the episode (30 % of the full-play frames,
+# and every hindsight goal of those stretches was "stay in the corner"). Humans end a session with the disc in a
+# corner instead (their episodes end after the disc rested a median 51 frames at its final spot): a corner leg
+# is the last one of an episode: a share PLAY_CORNER_EPISODES of the episodes push the disc into a corner with
+# the first disc leg after a random frame in [0.4, 1] x PLAY_CORNER_AFTER, rest there and end.
+PLAY_CORNER_AFTER = 400
+PLAY_CORNER_EPISODES = 0.6
+# A leg during which neither hand nor disc moves (by STALL_MOVE) for STALL_FRAMES is dropped: a human tries
+# something else instead of pressing the hand into a wall (3.6-6.5 % of the play frames before).
+STALL_FRAMES, STALL_MOVE = 10, 0.002
 # A human's region is a dashed line on the screen, and "keep the disc in the region" lets the disc touch the line:
 # its centre crosses it by up to a radius. Neighbouring regions' episodes then share the states near their border,
 # the only places where the eq. 5 backup can join them; with disc paths kept 0.06 inside their regions (as before),
@@ -118,10 +139,10 @@ class Pusher:
         i, j = idx[rng.integers(len(idx))]
         return grid_point(i, j) + rng.uniform(-0.02, 0.02, 2)
 
-    def sample_wall_disc(self, rng: np.random.Generator) -> np.ndarray:
-        """A disc target against a wall: half of the time a maze corner of the region, else any free spot within
-        WALL_BAND of the walls."""
-        if self.corners and rng.random() < 0.5:
+    def sample_wall_disc(self, rng: np.random.Generator, corners: bool = True) -> np.ndarray:
+        """A disc target against a wall: half of the time (if ``corners``) a maze corner of the region, else any
+        free spot within WALL_BAND of the walls."""
+        if corners and self.corners and rng.random() < 0.5:
             return self.corners[rng.integers(len(self.corners))].copy()
         i, j = self.wall_nodes[rng.integers(len(self.wall_nodes))]
         return grid_point(i, j)
@@ -184,7 +205,8 @@ class Pusher:
         if self._eff_plan is None or self._eff_plan[0] != key:
             d = np.linalg.norm(np.stack(np.meshgrid(GRID_COORDS, GRID_COORDS, indexing="ij"), -1) - obj, axis=-1)
             free = self.eff_free & (d > AVOID)
-            try:
+            try:  # only the hand's side of the disc and walls: a target in a pocket behind the disc is approached
+                free &= np.isfinite(distance_field(free, eff))  # as close as it gets (else no path at all)
                 self._eff_plan = (key, free, distance_field(free, target))
             except ValueError:  # nothing free: back off from the disc
                 return eff + _unit(eff - obj) * 0.1
@@ -331,21 +353,34 @@ class Leg:
     frames: int = 0
     slide: bool = False
     direction: np.ndarray | None = None
+    last: bool = False  # the episode ends with this leg
 
 
 class PlayFullSpace:
     """Goal-free play: push the disc to random targets (sometimes via a detour), move the effector alone,
-    pause; mild command noise. Never done (episodes end at the recorder's length)."""
+    pause; mild command noise. Done after a corner (a wedged disc cannot be pushed out), else episodes end at the
+    recorder's length."""
 
     region: int | None = None
 
-    def __init__(self, env, rng: np.random.Generator, noise: float = 0.01, leg_budget: int = 250,
+    def __init__(self, env, rng: np.random.Generator, noise: float = PLAY_NOISE, leg_budget: int = 250,
                  cursor_reach: float | None = CURSOR_REACH, pause_share: float = 0.12, effector_share: float = 0.18,
-                 rest_after_disc: float = PLAY_REST_AFTER_DISC, push_lookahead: float = PUSH_LOOKAHEAD, **_):
+                 rest_after_disc: float = PLAY_REST_AFTER_DISC, push_lookahead: float = PUSH_LOOKAHEAD,
+                 min_lead: float = PLAY_MIN_LEAD, effector_near: float | None = PLAY_EFFECTOR_NEAR,
+                 corner_after: int = PLAY_CORNER_AFTER, corner_episodes: float = PLAY_CORNER_EPISODES, **_):
         self.env, self.rng, self.noise, self.leg_budget = env, rng, float(noise), int(leg_budget)
         self.cursor_reach = cursor_reach
         self.pause_share, self.effector_share = float(pause_share), float(effector_share)
         self.rest_after_disc, self.push_lookahead = float(rest_after_disc), float(push_lookahead)
+        if not 0.0 < min_lead <= MAX_LEAD:
+            raise ValueError(f"min_lead must be in (0, {MAX_LEAD}], got {min_lead!r}")
+        self.min_lead = float(min_lead)
+        self.effector_near = None if effector_near is None else float(effector_near)
+        if not 0.0 <= corner_episodes <= 1.0:
+            raise ValueError(f"corner_episodes must be in [0, 1], got {corner_episodes!r}")
+        self.corner_after, self.corner_episodes = int(corner_after), float(corner_episodes)
+        self._frame, self._done, self._closing_frame = 0, False, None
+        self._last_state, self._stalled = np.zeros(4), 0
         self.pusher = Pusher(self.region, lookahead=self.push_lookahead)
         self._queue: list[Leg] = []
         self._budget = 0
@@ -359,30 +394,35 @@ class PlayFullSpace:
         obj = self.pusher.sample_disc(self.rng)
         eff = self.pusher.sample_effector(self.rng, obj, near=0.8)
         self.env.set_state(np.concatenate([eff, obj]))
-        self._queue = []
+        self._queue, self._frame, self._done = [], 0, False
+        closes = self.pusher.corners and self.rng.random() < self.corner_episodes
+        self._closing_frame = int(self.rng.uniform(0.4, 1.0) * self.corner_after) if closes else None
         return self.env.observe()
 
     def _random_effector_point(self, obj: np.ndarray) -> np.ndarray:
         for _ in range(100):
-            p = self.pusher.sample_effector(self.rng, obj)
+            p = self.pusher.sample_effector(self.rng, obj, near=self.effector_near)
             if self.region is None or inside_region(p, self.region, -0.25):
                 return p
         return self.pusher.sample_effector(self.rng, obj, near=0.6)
 
     def _new_leg(self, s: np.ndarray) -> None:
         r = self.rng.random()
-        self._budget, self._lead = self.leg_budget, self.rng.uniform(0.06, MAX_LEAD)
+        self._budget, self._lead = self.leg_budget, self.rng.uniform(self.min_lead, MAX_LEAD)
         if r < self.pause_share:
             self._queue = [self._pause()]
         elif r < self.pause_share + self.effector_share:
             self._queue = [Leg("effector", self._random_effector_point(s[2:]))]
-        elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall or into a corner, stopping there
-            target = self.pusher.sample_wall_disc(self.rng)
+        elif self._closing_frame is not None and self._frame >= self._closing_frame:  # into a corner: rest, end
+            target = self.pusher.corners[self.rng.integers(len(self.pusher.corners))].copy()
             via = self.pusher.corner_via(target, self.rng)
-            self._queue = [Leg("disc_stop", target, slide=via is not None)]
+            self._queue = [Leg("disc_stop", target, slide=via is not None), self._pause(last=True)]
             if via is not None:
                 self._queue.insert(0, Leg("disc_via", via))
-            if via is not None or self.rng.random() < self.rest_after_disc:  # nothing more to push in a corner
+            self._closing_frame = None
+        elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall, stopping there
+            self._queue = [Leg("disc_stop", self.pusher.sample_wall_disc(self.rng, corners=False))]
+            if self.rng.random() < self.rest_after_disc:
                 self._queue.append(self._pause())
         else:
             self._queue = [Leg("disc", self.pusher.sample_disc(self.rng))]
@@ -391,19 +431,27 @@ class PlayFullSpace:
             if self.rng.random() < self.rest_after_disc:  # a human often lets go once the disc is there
                 self._queue.append(self._pause())
 
-    def _pause(self) -> Leg:
+    def _pause(self, last: bool = False) -> Leg:
         """A rest of human-like length; the hand holds where it is when the pause starts."""
-        return Leg("pause", frames=int(self.rng.integers(PLAY_REST[0], PLAY_REST[1] + 1)))
+        return Leg("pause", frames=int(self.rng.integers(PLAY_REST[0], PLAY_REST[1] + 1)), last=last)
 
     def act(self, obs: dict) -> np.ndarray:
         s = np.asarray(obs["agent_pos"], dtype=np.float64)
         eff, obj = s[:2], s[2:]
+        self._frame += 1
+        moved = np.abs(s - self._last_state).max() > STALL_MOVE
+        self._stalled, self._last_state = 0 if moved else self._stalled + 1, s.copy()
+        if self._stalled >= STALL_FRAMES and self._queue and self._queue[0].kind != "pause":
+            self._queue.pop(0)  # nothing moves: the leg cannot be done from here (e.g. no room behind the disc)
+            self._stalled, self._budget = 0, self.leg_budget
         while True:
             if not self._queue:
                 self._new_leg(s)
             leg = self._queue[0]
             self._budget -= 1
             if leg.kind == "pause":
+                if leg.last and leg.frames <= 1:  # the last frame of the episode: hold, then done
+                    self._done = True
                 if leg.frames <= 0 or self._budget <= 0:
                     self._queue.pop(0)
                     continue
@@ -430,7 +478,7 @@ class PlayFullSpace:
 
     @property
     def done(self) -> bool:
-        return False
+        return self._done
 
 
 class PlayPartitioned(PlayFullSpace):
