@@ -67,7 +67,7 @@ PLAY_NOISE = 0.005
 # A disc pushed into a corner rests against both walls and no push can get it out (no room behind it): play that
 # went on after a corner flailed around the wedged disc for the rest of the episode (30 % of the full-play frames,
 # and every hindsight goal of those stretches was "stay in the corner"). Humans end a session with the disc in a
-# corner instead (their episodes end after the disc rested a median 51 frames at its final spot): a corner leg
+# corner instead (their episodes end after the disc rested a median 51 frames at its final spot). So a corner leg
 # is the last one of an episode: a share PLAY_CORNER_EPISODES of the episodes push the disc into a corner with
 # the first disc leg after a random frame in [0.4, 1] x PLAY_CORNER_AFTER, rest there and end.
 PLAY_CORNER_AFTER = 400
@@ -139,11 +139,9 @@ class Pusher:
         i, j = idx[rng.integers(len(idx))]
         return grid_point(i, j) + rng.uniform(-0.02, 0.02, 2)
 
-    def sample_wall_disc(self, rng: np.random.Generator, corners: bool = True) -> np.ndarray:
-        """A disc target against a wall: half of the time (if ``corners``) a maze corner of the region, else any
-        free spot within WALL_BAND of the walls."""
-        if corners and self.corners and rng.random() < 0.5:
-            return self.corners[rng.integers(len(self.corners))].copy()
+    def sample_wall_disc(self, rng: np.random.Generator) -> np.ndarray:
+        """A disc target against a wall, not in a corner (a disc wedged there cannot be pushed out): a free spot
+        within WALL_BAND of the walls."""
         i, j = self.wall_nodes[rng.integers(len(self.wall_nodes))]
         return grid_point(i, j)
 
@@ -421,7 +419,7 @@ class PlayFullSpace:
                 self._queue.insert(0, Leg("disc_via", via))
             self._closing_frame = None
         elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall, stopping there
-            self._queue = [Leg("disc_stop", self.pusher.sample_wall_disc(self.rng, corners=False))]
+            self._queue = [Leg("disc_stop", self.pusher.sample_wall_disc(self.rng))]
             if self.rng.random() < self.rest_after_disc:
                 self._queue.append(self._pause())
         else:
