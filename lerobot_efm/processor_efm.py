@@ -4,9 +4,11 @@ observation they mirror (``observation.goal.state`` uses the stats of ``observat
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import torch
 
 from lerobot.configs import PipelineFeatureType, PolicyFeature
@@ -17,6 +19,10 @@ from .configuration_efm import GOAL_PREFIX, MIRROR_PREFIXES, EFMConfig, is_mirro
 from .goal_source import deploy_goal, fit_live_images
 
 GOAL_BATCH_STEP = "efm_goal_batch_processor"
+# A feature that never changed in the recording (e.g. an object nobody touched during hand-only play) has a zero
+# range, which LeRobot's normaliser replaces by eps = 1e-8: a 4 mm nudge at deployment then reads as 4e5. Such a
+# feature is only centred instead (range 2, i.e. scale 1).
+CONSTANT_RANGE = 1e-6
 
 
 @dataclass
@@ -63,6 +69,42 @@ def _batch_size(observation: dict[str, Any]) -> int | None:
     return None
 
 
+def widen_constant_features(stats: dict[str, dict[str, Any]] | None) -> dict[str, dict[str, Any]] | None:
+    """Statistics in which every constant dimension (max - min or std under CONSTANT_RANGE) gets min/max = value
+    -/+ 1 and std = 1, with a warning naming it: the normaliser then centres it instead of dividing by eps."""
+    if stats is None:
+        return None
+    out = {}
+    for key, entry in stats.items():
+        entry = dict(entry)
+        if "min" in entry and "max" in entry:
+            lo, hi = (np.asarray(entry[k], dtype=np.float64) for k in ("min", "max"))
+            flat = (hi - lo) < CONSTANT_RANGE
+            if flat.any():
+                centre = (lo + hi) / 2
+                entry["min"] = _like(entry["min"], np.where(flat, centre - 1.0, lo))
+                entry["max"] = _like(entry["max"], np.where(flat, centre + 1.0, hi))
+            if flat.any() and (key == "action" or key.startswith("observation.")) and not is_mirror_key(key):
+                logging.warning("%s: dimension(s) %s never change in the dataset (range 0); normalised as value "
+                                "minus %s instead of divided by 1e-8", key, np.flatnonzero(flat).tolist(),
+                                np.round(centre[flat], 4).tolist())
+        if "std" in entry:
+            std = np.asarray(entry["std"], dtype=np.float64)
+            if (std < CONSTANT_RANGE).any():
+                entry["std"] = _like(entry["std"], np.where(std < CONSTANT_RANGE, 1.0, std))
+        out[key] = entry
+    return out
+
+
+def _like(reference: Any, values: np.ndarray) -> Any:
+    """``values`` in the container type and dtype of ``reference`` (tensor, array or list)."""
+    if isinstance(reference, torch.Tensor):
+        return torch.as_tensor(values, dtype=reference.dtype)
+    if isinstance(reference, np.ndarray):
+        return values.astype(reference.dtype)
+    return values.tolist()
+
+
 def mirror_stats(stats: dict[str, dict[str, Any]] | None) -> dict[str, dict[str, Any]] | None:
     """Add, for every ``observation.<key>`` statistic, the same statistic under each mirrored key
     (goal, RL goal, observation trajectory), so the stock normaliser treats goals like observations."""
@@ -85,7 +127,7 @@ def make_efm_pre_post_processors(
 ]:
     # The goal features must be part of the config before the normaliser reads them.
     config.add_mirror_features()
-    s = make_default_policy_processor_steps(config, mirror_stats(dataset_stats))
+    s = make_default_policy_processor_steps(config, mirror_stats(widen_constant_features(dataset_stats)))
     return make_policy_processor_pipelines(
         input_steps=[s.rename_observations, s.add_batch_dim, AddBatchDimensionToGoalsStep(), s.to_device, s.normalize],
         output_steps=[s.unnormalize, s.to_cpu],

@@ -172,3 +172,23 @@ def test_live_camera_frames_of_another_resolution_are_resized_once_warned(video_
     assert processed["observation.images.top"].shape == (1, 3, 32, 32)
     assert sum("sends (3, 48, 64) frames" in r.message for r in caplog.records) == 1
     assert policy.select_action(processed).shape == (1, 2)
+
+
+def test_a_dimension_constant_in_the_recording_is_centred_not_divided_by_eps(state_dataset, caplog):
+    """A deployed robot nudges what never moved in the play recording: its normalised value must stay of the
+    order of the nudge (LeRobot divides a zero range by 1e-8), for the observation and for the goal."""
+    import copy
+
+    cfg = tiny_config("efm_ac")
+    wrapped = HindsightGoalDataset(state_dataset, cfg)
+    make_policy(cfg, ds_meta=wrapped.meta)
+    stats = copy.deepcopy(wrapped.meta.stats)
+    for key in [k for k in stats if k.startswith("observation.") and k.endswith("state")]:  # and the goal's
+        stats[key]["min"][1] = stats[key]["max"][1] = 0.25  # never changed
+    with caplog.at_level(logging.WARNING):
+        pre, _ = make_pre_post_processors(cfg, dataset_stats=stats)
+    assert "observation.state: dimension(s) [1] never change" in caplog.text
+    nudged = torch.tensor([[0.0, 0.254]])
+    out = pre({"observation.state": nudged, "observation.goal.state": nudged})
+    for key in ("observation.state", "observation.goal.state"):
+        assert abs(float(out[key][0, 1]) - 0.004) < 1e-5, out[key]

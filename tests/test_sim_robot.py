@@ -82,3 +82,55 @@ def test_goal_captured_from_a_live_robot(tmp_path):
     assert goal["observation.images.top"].shape == (3, 32, 32) and goal["observation.images.top"].max() <= 1.0
     start = torch.tensor([0.15, -0.5, 0.5, -0.5])  # evaluation pair 0's start, where the robot connects
     assert (goal["observation.state"] - start)[:2].abs().max() > 0.02  # the teleoperator moved the hand
+
+
+def _goal_frame_clear_of_the_disc(states: np.ndarray) -> int:
+    """A recorded frame whose hand is 0.2-0.4 from the start hand by a straight line that keeps 0.32 off the
+    (untouched) disc: a goal the policy reaches without going around the disc."""
+    start, disc = states[0, :2], states[0, 2:]
+    offset = states[:, :2] - start
+    along = np.clip((disc - start) @ offset.T / np.maximum((offset**2).sum(1), 1e-9), 0.0, 1.0)
+    clearance = np.linalg.norm(start + along[:, None] * offset - disc, axis=1)
+    distance = np.linalg.norm(offset, axis=1)
+    frames = np.flatnonzero((distance > 0.2) & (distance < 0.4) & (clearance > 0.32))
+    assert len(frames) > 0, "the hand play never went to the far side of the disc"
+    return int(frames[len(frames) // 2])
+
+
+def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
+    """The deployment workflow a user follows, checked on the simulator's state: record hand-only play with
+    lerobot-record, train efm_gc with lerobot-train, export a frame as the goal with lerobot-efm-goal, and let
+    lerobot-rollout (episodic: it records what the robot does) drive the hand there, the disc untouched."""
+    from safetensors.torch import load_file
+
+    data, ckpt_dir, goal, rollout = tmp_path / "hand", tmp_path / "train", tmp_path / "goal.st", tmp_path / "rollout"
+    robot = ["--robot.type=efm_sim_planar_push", "--robot.id=sim"]
+    run("lerobot-record", *robot, "--teleop.type=efm_scripted_planar_push", "--teleop.behaviour=hand",
+        "--teleop.robot_id=sim", "--dataset.repo_id=local/hand_play", f"--dataset.root={data}",
+        "--dataset.single_task=reach", "--dataset.fps=100", "--dataset.num_episodes=1", "--dataset.episode_time_s=20",
+        "--dataset.reset_time_s=0", "--dataset.push_to_hub=false", "--play_sounds=false")
+    states = np.stack(LeRobotDataset("local/hand_play", root=data).hf_dataset["observation.state"])
+    assert len(states) > 1000 and np.ptp(states[:, 2:], axis=0).max() == 0.0  # the disc was never touched
+
+    run("lerobot-train", "--policy.type=efm_gc", "--dataset.repo_id=local/hand_play", f"--dataset.root={data}",
+        f"--output_dir={ckpt_dir}", "--policy.device=cpu", "--policy.push_to_hub=false",
+        "--policy.max_goal_distance=100", "--policy.obs_traj_stride=4", "--policy.mlp_hidden_dims=[64,64]",
+        "--policy.unet_down_dims=[16,32,32]", "--policy.unet_n_groups=4", "--policy.num_inference_steps=5",
+        "--wandb.enable=false", "--num_workers=0", "--batch_size=64", "--log_freq=500", "--steps=1000",
+        "--save_freq=1000", timeout=600)
+    frame = _goal_frame_clear_of_the_disc(states)
+    run("lerobot-efm-goal", f"--dataset.root={data}", "--dataset.repo_id=local/hand_play", f"--dataset.frame={frame}",
+        f"--output={goal}")
+    target = load_file(str(goal))["observation.state"].numpy()
+    assert np.allclose(target, states[frame])
+
+    run("lerobot-rollout", "--strategy.type=episodic", f"--policy.path={ckpt_dir}/checkpoints/last/pretrained_model",
+        f"--policy.goal_path={goal}", "--policy.device=cpu", *robot, "--dataset.repo_id=local/rollout_reach",
+        f"--dataset.root={rollout}", "--dataset.single_task=reach", "--dataset.num_episodes=1",
+        "--dataset.episode_time_s=8", "--dataset.reset_time_s=0", "--dataset.push_to_hub=false", "--fps=50",
+        "--play_sounds=false")
+    driven = np.stack(LeRobotDataset("local/rollout_reach", root=rollout).hf_dataset["observation.state"])
+    assert np.allclose(driven[0], states[0], atol=1e-4)  # the robot starts where the play started
+    # success as the planar push env defines it, at any step: hand and disc each within 0.04 of the goal's
+    error = np.linalg.norm((driven - target).reshape(len(driven), 2, 2), axis=-1).max(axis=-1)
+    assert error.min() < 0.04, f"closest approach {error.min():.3f} (hand {driven[error.argmin(), :2]}, goal {target})"

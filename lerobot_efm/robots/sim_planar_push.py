@@ -30,6 +30,7 @@ from lerobot.teleoperators import Teleoperator, TeleoperatorConfig
 STATE_NAMES = ("eff_x.pos", "eff_y.pos", "obj_x.pos", "obj_y.pos")
 ACTION_NAMES = ("x.pos", "y.pos")
 CAMERA = "top"
+PLAY_BEHAVIOURS = ("full", "partitioned", "hand")  # scripted operators of lerobot_efm.envs.planar_push.demonstrators
 
 # connected simulated robots by id, so that a scripted teleoperator of the same process can drive one
 _SIM_ROBOTS: dict[str | None, "SimPlanarPush"] = {}
@@ -112,7 +113,9 @@ class SimPlanarPush(Robot):
 @TeleoperatorConfig.register_subclass("efm_scripted_planar_push")
 @dataclass(kw_only=True)
 class ScriptedPlanarPushConfig(TeleoperatorConfig):
-    behaviour: str = "full"  # "full" or "partitioned" play (lerobot_efm.envs.planar_push.demonstrators)
+    # "full" or "partitioned" play, or "hand": the hand alone around the disc (a reach task for dry runs);
+    # lerobot_efm.envs.planar_push.demonstrators
+    behaviour: str = "full"
     robot_id: str | None = None  # --robot.id of the simulated robot it drives
     noise: float = 0.01  # command noise of the play operator
     seed: int = 0
@@ -124,8 +127,8 @@ class ScriptedPlanarPush(Teleoperator):
 
     def __init__(self, config: ScriptedPlanarPushConfig):
         super().__init__(config)
-        if config.behaviour not in ("full", "partitioned"):
-            raise ValueError(f"--teleop.behaviour must be 'full' or 'partitioned', got {config.behaviour!r}")
+        if config.behaviour not in PLAY_BEHAVIOURS:
+            raise ValueError(f"--teleop.behaviour must be one of {PLAY_BEHAVIOURS}, got {config.behaviour!r}")
         self.config = config
         self.operator = None
         self._connected = False
@@ -164,11 +167,11 @@ class ScriptedPlanarPush(Teleoperator):
         return robot
 
     def get_action(self) -> dict:
-        from lerobot_efm.envs.planar_push.demonstrators import PlayFullSpace, PlayPartitioned
+        from lerobot_efm.envs.planar_push.demonstrators import BEHAVIOURS
 
         robot = self._robot()
         if self.operator is None:  # plays on from the state the robot is in (no reset: no jump in the recording)
-            cls = PlayFullSpace if self.config.behaviour == "full" else PlayPartitioned
+            cls = BEHAVIOURS[self.config.behaviour][0]
             self.operator = cls(robot.env, np.random.default_rng(self.config.seed), noise=self.config.noise)
         command = self.operator.act(robot.env.observe())
         return {name: float(x) for name, x in zip(ACTION_NAMES, command, strict=True)}

@@ -498,6 +498,16 @@ class PlayPartitioned(PlayFullSpace):
         self.pusher = self._pushers[self.region]
 
 
+class PlayHandOnly(PlayFullSpace):
+    """Hand-only play: the hand wanders between random free points within ``effector_near`` of the disc (around
+    it, never pushing it) and pauses. The simplest goal-reaching task: a deployment dry run trains on it in a
+    minute and must then bring the hand to a goal, the disc untouched (``tests/test_sim_robot.py``)."""
+
+    def __init__(self, env, rng: np.random.Generator, pause_share: float = 0.15, **kwargs):
+        kwargs.update(effector_share=1.0 - pause_share, corner_episodes=0.0)
+        super().__init__(env, rng, pause_share=pause_share, **kwargs)
+
+
 # ------------------------------------------------------------------------------------------ recording
 
 BEHAVIOURS = {
@@ -505,6 +515,7 @@ BEHAVIOURS = {
     "expert": (ExpertReachGoal, 600, "push the disc to a corner of the maze"),
     "full": (PlayFullSpace, 800, "play: push the disc anywhere in the maze"),
     "partitioned": (PlayPartitioned, 630, "play: push the disc inside one region of the maze"),
+    "hand": (PlayHandOnly, 600, "play: move the hand around the disc without touching it"),
 }
 
 
@@ -579,7 +590,7 @@ def evaluate_expert(max_steps: int = 600) -> dict[str, float]:
 def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int = 0, with_images: bool = False,
                                repo_id: str | None = None, image_size: int = 96, max_episode_frames: int | None = None,
                                verbose: bool = False, operator_options: dict | None = None):
-    """Record episodes of ``behaviour`` (expert | full | partitioned) until about ``num_frames`` frames into a
+    """Record episodes of ``behaviour`` (expert | full | partitioned | hand) until about ``num_frames`` frames into a
     new LeRobot v3 dataset at ``root`` (must not exist). Expert episodes that do not reach their corner are
     dropped. ``operator_options`` are keyword arguments of the operator class (e.g. ``noise``). Returns the
     dataset reopened read-only."""
