@@ -12,7 +12,7 @@ from lerobot_efm.envs import PlanarPushEnv, PlanarPushEnvConfig
 from lerobot_efm.envs.planar_push.demonstrators import (
     BEHAVIOURS, CORNER_SLIDE, CORNERS, CURSOR_REACH, PLAY_REST, REGION_OVERLAP, STALL_FRAMES, VIA_TOL, ExpertReachGoal,
     Leg, PlayFullSpace, PlayPartitioned, Pusher, disc_coverage, evaluate_expert, main, parse_options, record_planar_push_dataset,
-    run_episode,
+    WALL_SLIDE_TO, run_episode,
 )
 from lerobot_efm.envs.planar_push.env import EVAL_PAIRS, FPS, GYM_ID, SUCCESS_TOL, TASK_NAMES
 from lerobot_efm.envs.planar_push.maze import CELL, CORNER, inside_region, region_of, wall_distance
@@ -383,3 +383,40 @@ def test_lerobot_make_env_and_images():
     assert env.render().shape == (256, 256, 3)
     env.close()
 
+
+def _slide_frames(states: np.ndarray) -> int:
+    """Frames in which the disc moves along a wall line (one coordinate at a corner's) towards that corner, within
+    0.7 of it: the final approach to the corner goals."""
+    obj, step = states[:-1, 2:], np.diff(states[:, 2:], axis=0)
+    count = 0
+    for corner in CORNERS:
+        for wall_axis in (0, 1):
+            along = 1 - wall_axis
+            gap = corner[along] - obj[:, along]
+            count += int(((np.abs(obj[:, wall_axis] - corner[wall_axis]) < 0.03) & (np.abs(gap) < 0.7)
+                          & (step[:, along] * np.sign(gap) > 0.002)).sum())
+    return count
+
+
+def test_play_slides_along_walls_towards_corners_and_stops_short(env):
+    """``wall_slides``: wall legs that slide the disc along a wall towards a corner (the final approach to the corner
+    goals, otherwise shown once per episode at most) and stop where the hand still fits in front of the corner,
+    so that play goes on: many more slide frames, the disc never wedged, and it leaves the corner again."""
+    def play(wall_slides):
+        slides, left, wedged = 0, 0, 0
+        for seed in range(3):
+            op = PlayFullSpace(env, np.random.default_rng(seed), wall_slides=wall_slides, corner_episodes=0.0)
+            states = run_episode(env, op, 800)[0]
+            slides += _slide_frames(states)
+            to_corner = np.linalg.norm(states[:, None, 2:] - CORNERS[None], axis=-1).min(axis=1)
+            wedged += int((to_corner < 0.05).sum())  # as far in as a corner goal
+            stopped = np.flatnonzero(to_corner < WALL_SLIDE_TO[1] + 0.02)
+            left += int(len(stopped) > 0 and (to_corner[stopped[-1]:] > 0.5).any())
+        return slides, left, wedged
+
+    base, _, _ = play(0.0)
+    slides, left, wedged = play(1.0)
+    assert slides > 40 and slides > 5 * base, (slides, base)
+    assert wedged == 0 and left >= 1, (wedged, left)
+    with pytest.raises(ValueError, match="wall_slides must be in"):
+        PlayFullSpace(env, np.random.default_rng(0), wall_slides=1.5)

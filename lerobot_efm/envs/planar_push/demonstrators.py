@@ -85,6 +85,14 @@ REGION_OVERLAP = OBJECT_RADIUS
 # along a wall). Corner legs first bring the disc onto a wall's line this far from the corner.
 CORNER_SLIDE = 0.35
 VIA_TOL = 0.02  # the disc stops this close to such a via point, lined up for the slide
+# The final approach to a corner goal is a slide along a wall, yet a play episode holds at most one (its last
+# leg: a wedged disc ends it), ~30 in the whole full-play recording against the expert's ~175; rollouts carried
+# the disc to the goal's wall and stopped short. Humans also slide a disc along a wall towards a corner and stop
+# before it: a share PLAY_WALL_SLIDES of the wall legs line the disc up WALL_SLIDE_FROM from a corner and slide
+# it to WALL_SLIDE_TO from it, where the hand still fits between disc and corner (diameter 0.15).
+PLAY_WALL_SLIDES = 0.0
+WALL_SLIDE_FROM = (0.4, 0.7)
+WALL_SLIDE_TO = (0.18, 0.3)
 SLIDE_TILT = 0.08  # a slide pushes this much into its wall (isotropic friction: else it may stop short of it)
 # A human moves a mouse cursor that the effector trails (the authors' recordings: |cmd - eff| = 0.063 on
 # average); a script may instead command a far target at once. Beyond MAX_LEAD = 0.1 from the effector the force
@@ -157,6 +165,21 @@ class Pusher:
         vias = [v for v in vias if wall_distance(v) >= fits and segment_clear(v, corner, fits)
                 and (self.region is None or inside_region(v, self.region, -REGION_OVERLAP))]
         return vias[rng.integers(len(vias))].copy() if vias else None
+
+    def wall_slide(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray] | None:
+        """(start, stop) of a slide along a wall towards a random corner of this region that stops short of it
+        (WALL_SLIDE_FROM / WALL_SLIDE_TO from the corner); None when no wall line fits."""
+        if not self.corners:
+            return None
+        corner = self.corners[rng.integers(len(self.corners))]
+        inward = -np.sign(corner) * np.eye(2)[rng.integers(2)]
+        start, stop = corner + inward * rng.uniform(*WALL_SLIDE_FROM), corner + inward * rng.uniform(*WALL_SLIDE_TO)
+        fits = OBJECT_RADIUS + 0.004
+        if wall_distance(start) < fits or not segment_clear(start, stop, fits):
+            return None
+        if self.region is not None and not inside_region(start, self.region, -REGION_OVERLAP):
+            return None
+        return start, stop
 
     def sample_effector(self, rng: np.random.Generator, obj: np.ndarray, near: float | None = None) -> np.ndarray:
         """A free effector position clear of the disc (within ``near`` of it if given)."""
@@ -365,7 +388,8 @@ class PlayFullSpace:
                  cursor_reach: float | None = CURSOR_REACH, pause_share: float = 0.12, effector_share: float = 0.18,
                  rest_after_disc: float = PLAY_REST_AFTER_DISC, push_lookahead: float = PUSH_LOOKAHEAD,
                  min_lead: float = PLAY_MIN_LEAD, effector_near: float | None = PLAY_EFFECTOR_NEAR,
-                 corner_after: int = PLAY_CORNER_AFTER, corner_episodes: float = PLAY_CORNER_EPISODES, **_):
+                 corner_after: int = PLAY_CORNER_AFTER, corner_episodes: float = PLAY_CORNER_EPISODES,
+                 wall_slides: float = PLAY_WALL_SLIDES, **_):
         self.env, self.rng, self.noise, self.leg_budget = env, rng, float(noise), int(leg_budget)
         self.cursor_reach = cursor_reach
         self.pause_share, self.effector_share = float(pause_share), float(effector_share)
@@ -377,6 +401,9 @@ class PlayFullSpace:
         if not 0.0 <= corner_episodes <= 1.0:
             raise ValueError(f"corner_episodes must be in [0, 1], got {corner_episodes!r}")
         self.corner_after, self.corner_episodes = int(corner_after), float(corner_episodes)
+        if not 0.0 <= wall_slides <= 1.0:
+            raise ValueError(f"wall_slides must be in [0, 1], got {wall_slides!r}")
+        self.wall_slides = float(wall_slides)
         self._frame, self._done, self._closing_frame = 0, False, None
         self._last_state, self._stalled = np.zeros(4), 0
         self.pusher = Pusher(self.region, lookahead=self.push_lookahead)
@@ -419,7 +446,12 @@ class PlayFullSpace:
                 self._queue.insert(0, Leg("disc_via", via))
             self._closing_frame = None
         elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall, stopping there
-            self._queue = [Leg("disc_stop", self.pusher.sample_wall_disc(self.rng))]
+            slides = self.wall_slides > 0 and self.rng.random() < self.wall_slides  # (0: the old random stream)
+            slide = self.pusher.wall_slide(self.rng) if slides else None
+            if slide is None:
+                self._queue = [Leg("disc_stop", self.pusher.sample_wall_disc(self.rng))]
+            else:  # along a wall towards a corner, stopping short of it
+                self._queue = [Leg("disc_via", slide[0]), Leg("disc_stop", slide[1], slide=True)]
             if self.rng.random() < self.rest_after_disc:
                 self._queue.append(self._pause())
         else:
@@ -469,7 +501,8 @@ class PlayFullSpace:
                 if leg.slide and leg.direction is None:  # the slide's line is fixed where it starts
                     leg.direction = slide_direction(obj, leg.target)
                 # a slide into a corner needs no braking: the walls stop the disc, against both of them
-                cmd = self.pusher.push(s, leg.target, final=leg.kind != "disc" and not leg.slide, lead=self._lead,
+                into_corner = leg.slide and np.abs(leg.target).min() >= CORNER - 1e-9
+                cmd = self.pusher.push(s, leg.target, final=leg.kind != "disc" and not into_corner, lead=self._lead,
                                        direction=leg.direction)
             break
         return _send(eff, cmd, self.cursor_reach, self.noise, self.rng)
