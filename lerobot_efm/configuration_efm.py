@@ -85,6 +85,9 @@ class EFMConfig(PreTrainedConfig):
             ``lerobot-rollout --policy.path=CKPT --policy.goal_path=goal.safetensors``.
             ``goal_path`` may list several files, comma-separated: a multi-step task, each goal kept until
         goal_advance_distance: the critic's distance to it (in steps) falls under this; then the next one.
+        goal_advance_key: or when this key is pressed (a LeRobot key name: a character, "enter", "space",
+            "right", ...; read by LeRobot's keyboard listener, the terminal's on a headless machine; None: off).
+            With a key, FM-GC (no critic) can follow a sequence too.
 
     Training:
         num_critics: critics trained side by side; every value uses their max (pessimistic for a distance).
@@ -127,6 +130,7 @@ class EFMConfig(PreTrainedConfig):
     goal_episode: int = 0
     goal_frame: int = -1
     goal_advance_distance: float = 10.0
+    goal_advance_key: str | None = None
 
     num_critics: int = 2
     critic_loss_weight: float = 0.1
@@ -197,6 +201,7 @@ class EFMConfig(PreTrainedConfig):
             "rl_ramp_steps": self.rl_ramp_steps >= 0,
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
             "goal_advance_distance": self.goal_advance_distance >= 0.0,
+            "goal_advance_key": self.goal_advance_key is None or bool(self.goal_advance_key.strip()),
             "n_action_steps": 1 <= self.n_action_steps <= (self.action_traj_len - 1) * self.action_traj_stride + 1,
         }
         bad = [name for name, ok in checks.items() if not ok]

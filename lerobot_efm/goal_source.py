@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lerobot.utils.keyboard_input import create_key_listener
+
 from .configuration_efm import GOAL_PREFIX, OBS_PREFIX, is_mirror_key
 
 log = logging.getLogger(__name__)
@@ -26,13 +28,38 @@ log = logging.getLogger(__name__)
 # and which one is current. Deployment CLIs rebuild the pre-processor from the checkpoint's JSON, so the saved
 # step cannot receive the CLI's --policy.goal_* values; the policy, built from the CLI-overridden config, sets
 # the goals here instead, and advances them when its critic says the current one is reached.
-_deploy = {"goals": [], "index": 0, "image_shapes": {}, "warned": set()}
+_deploy = {"goals": [], "index": 0, "image_shapes": {}, "warned": set(), "key": None, "key_pressed": False,
+           "listener": None}
 
 
-def set_deploy_goal(goal: dict[str, torch.Tensor] | list[dict[str, torch.Tensor]] | None) -> None:
-    """Replace the goal (or the sequence of goals) inserted into goal-less observations (None removes it)."""
+def set_deploy_goal(goal: dict[str, torch.Tensor] | list[dict[str, torch.Tensor]] | None,
+                    advance_key: str | None = None) -> None:
+    """Replace the goal (or the sequence of goals) inserted into goal-less observations (None removes it).
+    ``advance_key``: a key whose press moves a sequence on to its next goal (LeRobot's keyboard listener)."""
     goals = [] if not goal else [goal] if isinstance(goal, dict) else list(goal)
-    _deploy["goals"], _deploy["index"] = goals, 0
+    _deploy["goals"], _deploy["index"], _deploy["key_pressed"] = goals, 0, False
+    if _deploy["listener"] is not None:
+        _deploy["listener"].stop()
+    _deploy["key"], _deploy["listener"] = None, None
+    if advance_key and len(goals) > 1:
+        _deploy["key"] = advance_key
+        _deploy["listener"] = create_key_listener(_on_key, controls_help=f"'{advance_key}' = next goal")
+
+
+def _on_key(name: str) -> None:
+    """Keyboard listener thread: remember the press; the control loop advances at its next action."""
+    if name == _deploy["key"]:
+        _deploy["key_pressed"] = True
+
+
+def advance_deploy_goal_on_key() -> bool:
+    """Move on to the next goal if the advance key was pressed since the last call; True when it advanced."""
+    pressed, _deploy["key_pressed"] = _deploy["key_pressed"], False
+    if not pressed or _deploy["index"] + 1 >= len(_deploy["goals"]):
+        return False
+    _deploy["index"] += 1
+    log.info("key '%s': now goal %d of %d", _deploy["key"], _deploy["index"], len(_deploy["goals"]))
+    return True
 
 
 def set_image_shapes(shapes: dict[str, tuple[int, ...]]) -> None:

@@ -18,7 +18,9 @@ from torch import Tensor
 from lerobot.policies.pretrained import PreTrainedPolicy
 
 from .agents import EFMAgent, make_agent
-from .goal_source import advance_deploy_goal, has_goal_source, load_goals, set_deploy_goal, set_image_shapes
+from .goal_source import (
+    advance_deploy_goal, advance_deploy_goal_on_key, has_goal_source, load_goals, set_deploy_goal, set_image_shapes,
+)
 from .configuration_efm import (
     GOAL_DISTANCE_KEY,
     GOAL_PREFIX,
@@ -53,10 +55,10 @@ class EFMPolicy(PreTrainedPolicy):
         self.register_buffer("ema_updates", torch.zeros((), dtype=torch.long))
         # deployment: the goal named by --policy.goal_* (none: clear any earlier policy's) for the pre-processor
         goals = load_goals(config) if has_goal_source(config) else None
-        if goals and len(goals) > 1 and not config.uses_critic:
+        if goals and len(goals) > 1 and not config.uses_critic and not config.goal_advance_key:
             raise ValueError(f"a sequence of {len(goals)} goals advances on the critic's distance; "
-                             f"{config.type} has no critic")
-        set_deploy_goal(goals)
+                             f"{config.type} has no critic: set --policy.goal_advance_key to advance on a key press")
+        set_deploy_goal(goals, config.goal_advance_key)
         set_image_shapes({k: tuple(ft.shape) for k, ft in config.observation_features.items() if ".images." in k})
         self.reset()
 
@@ -96,7 +98,10 @@ class EFMPolicy(PreTrainedPolicy):
         """Receding horizon: execute ``n_action_steps`` control steps of the chunk, then replan.
 
         With a sequence of deploy-time goals, a critic distance under ``goal_advance_distance`` moves on to the
-        next goal: one step of this chunk is executed, then the policy replans towards the new goal."""
+        next goal: one step of this chunk is executed, then the policy replans towards the new goal. A press of
+        ``goal_advance_key`` moves on too, dropping the rest of the chunk."""
+        if advance_deploy_goal_on_key():
+            self._action_queue.clear()
         if not self._action_queue:
             chunk = self.predict_action_chunk(batch)
             steps = _to_control_rate(chunk, self.config.action_traj_stride, self.config.action_mode)

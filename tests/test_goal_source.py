@@ -11,7 +11,7 @@ from safetensors.torch import save_file
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.policies.factory import get_policy_class, make_policy, make_pre_post_processors
-from lerobot_efm.goal_source import deploy_goal, set_deploy_goal, to_goal_keys
+from lerobot_efm.goal_source import deploy_goal, deploy_goal_index, set_deploy_goal, to_goal_keys
 from lerobot_efm.hindsight import HindsightGoalDataset
 from lerobot_efm.scripts.goal import main as goal_cli
 
@@ -22,9 +22,9 @@ def _no_goal_left_behind():
     set_deploy_goal(None)
 
 
-def checkpoint(dataset, tmp_path):
-    """A saved efm_ac checkpoint (weights, config, pre/post-processors) as lerobot-train writes it."""
-    cfg = tiny_config("efm_ac")
+def checkpoint(dataset, tmp_path, policy_type="efm_ac"):
+    """A saved checkpoint (weights, config, pre/post-processors) as lerobot-train writes it."""
+    cfg = tiny_config(policy_type)
     wrapped = HindsightGoalDataset(dataset, cfg)
     policy = make_policy(cfg, ds_meta=wrapped.meta)
     pre, post = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
@@ -160,6 +160,45 @@ def test_a_goal_sequence_needs_a_critic(state_dataset, tmp_path):
     with pytest.raises(ValueError, match="sequence of 2 goals.*efm_gc has no critic"):
         get_policy_class("efm_gc").from_pretrained(tmp_path / "gc", config=cfg)
 
+
+def test_a_key_press_moves_a_goal_sequence_on_even_without_critic(state_dataset, tmp_path, monkeypatch):
+    """--policy.goal_advance_key=g: LeRobot's keyboard listener reports key names; 'g' moves on to the next goal at
+    the next action (the chunk towards the old goal is dropped), other keys do nothing; FM-GC may then follow a
+    sequence although it has no critic."""
+    import lerobot_efm.goal_source as goal_source
+
+    listeners = []
+
+    class FakeListener:  # what lerobot.utils.keyboard_input.create_key_listener returns (a thread with stop())
+        def __init__(self, dispatch, controls_help=""):
+            self.dispatch, self.help, self.stopped = dispatch, controls_help, False
+            listeners.append(self)
+
+        def stop(self):
+            self.stopped = True
+
+    monkeypatch.setattr(goal_source, "create_key_listener", FakeListener)
+    path = checkpoint(state_dataset, tmp_path, "efm_gc")
+    first, second = tmp_path / "a.safetensors", tmp_path / "b.safetensors"
+    save_file({"observation.state": torch.tensor([0.2, 0.2])}, str(first))
+    save_file({"observation.state": torch.tensor([-0.3, 0.1])}, str(second))
+    policy, pre, _ = deploy(path, f"--goal_path={first},{second}", "--goal_advance_key=g")
+    assert len(listeners) == 1 and "'g' = next goal" in listeners[0].help
+    robot = {"observation.state": torch.tensor([[0.0, 0.0]])}
+    policy.select_action(pre(dict(robot)))
+    queued = len(policy._action_queue)
+    listeners[0].dispatch("x")
+    policy.select_action(pre(dict(robot)))
+    assert deploy_goal_index() == 0 and len(policy._action_queue) == queued - 1
+    listeners[0].dispatch("g")
+    policy.select_action(pre(dict(robot)))  # replanned towards goal b
+    assert deploy_goal_index() == 1 and len(policy._action_queue) == policy.config.n_action_steps - 1
+    assert torch.allclose(deploy_goal()["observation.goal.state"], torch.tensor([-0.3, 0.1]))
+    listeners[0].dispatch("g")  # the last goal stays
+    policy.select_action(pre(dict(robot)))
+    assert deploy_goal_index() == 1
+    set_deploy_goal(None)
+    assert listeners[0].stopped  # a new deployment (or none) stops the old listener
 
 def test_live_camera_frames_of_another_resolution_are_resized_once_warned(video_dataset, tmp_path, caplog):
     path = checkpoint(video_dataset, tmp_path)
