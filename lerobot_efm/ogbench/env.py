@@ -35,6 +35,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_STATE
 
 from lerobot_efm.envs.goal_env import GoalEnvConfig
+from lerobot_efm.extras import require
 
 GYM_ID = "lerobot_efm/OGBench-v0"
 GOAL_STATE_KEY = "goal.state"  # env key; becomes observation.goal.state
@@ -81,7 +82,7 @@ class OGBenchEnv(gym.Env):
             raise ValueError(f"Unknown render_backend {render_backend!r}; valid: {list(RENDER_BACKENDS)}")
         self.render_backend, self.render_mode = render_backend, render_mode
         obs_dim, act_dim, _ = DATASETS[dataset]
-        import ogbench  # lazy: MuJoCo + dm_control
+        ogbench = require("ogbench", "ogbench", "the OGBench environments")  # lazy: MuJoCo + dm_control
 
         self.maze = ogbench.make_env_and_datasets(dataset, env_only=True, terminate_at_goal=True).unwrapped
         box = spaces.Box(-np.inf, np.inf, shape=(obs_dim,), dtype=np.float32)

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_efm.extras import require
+
 NOISE = 0.5  # OGBench's --noise for pointmaze
 STITCH_CELLS = 4  # BFS distance of stitch goals
 RAW_KEYS = ("observations", "actions", "terminals", "qpos", "qvel")
@@ -83,7 +85,7 @@ def cells_at_distance(maze_map: np.ndarray, source: tuple[int, int], steps: int)
 
 def make_ogbench_env(dataset_name: str, **env_kwargs):
     """OGBench's env for a dataset name, without touching the (offline) dataset server."""
-    import ogbench  # lazy: MuJoCo + dm_control imports cost ~0.3 s
+    ogbench = require("ogbench", "ogbench", "OGBench dataset generation")  # lazy: imports cost ~0.3 s
 
     return ogbench.make_env_and_datasets(dataset_name, env_only=True, **env_kwargs)
 

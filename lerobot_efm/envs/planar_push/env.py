@@ -49,6 +49,7 @@ from gymnasium import spaces
 from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
 
+from ...extras import require
 from ..goal_env import GoalEnvConfig, add_camera_features, state_goal_features, state_goal_features_map
 from .maze import ARENA, CORNER, EFFECTOR_RADIUS, OBJECT_RADIUS, wall_boxes, wall_distance
 
@@ -185,7 +186,7 @@ class PlanarPushEnv(gym.Env):
         if render_mode != "rgb_array":
             raise ValueError(f"render_mode must be 'rgb_array', got {render_mode!r}")
         os.environ.setdefault("MUJOCO_GL", "egl")
-        import mujoco
+        mujoco = require("mujoco", "planar", "the planar_push environment")
 
         self._mj = mujoco
         self.obs_type, self.image_size = obs_type, int(image_size)

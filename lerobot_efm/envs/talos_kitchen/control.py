@@ -24,8 +24,11 @@ friction pinch alone (the fingers' inner links close on its box bar before the f
 
 from __future__ import annotations
 
-import mujoco
 import numpy as np
+
+from ...extras import require
+
+mujoco = require("mujoco", "talos", "the Talos kitchen")
 
 from .scene import GRIPPER_CLOSED, HOME, KitchenHandles
 

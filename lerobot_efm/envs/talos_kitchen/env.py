@@ -55,6 +55,7 @@ from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 
+from ...extras import require
 from ..goal_env import GoalEnvConfig
 from .tasks import (
     ALL, DOOR_TOL, POT_TOL, TASK_NAMES, TASKS, TRAY_TOL, KitchenState, KitchenTask, check_task, describe,
@@ -110,7 +111,7 @@ class TalosKitchenEnv(gym.Env):
         self._render_renderer = (self._renderer if self.render_size == self.image_size
                                  else scene.KitchenRenderer(self.model, self.render_size))
         self._tray_body = self.model.body("tray").id
-        import mujoco
+        mujoco = require("mujoco", "talos", "the Talos kitchen")
 
         self._mj = mujoco
         self._home_cmd = control.hand_pose10(self.data, self.h)  # data is at home after build_kitchen

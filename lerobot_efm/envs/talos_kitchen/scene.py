@@ -59,14 +59,16 @@ Bug fixed here: ``MjSpec`` hinge ranges are in **degrees** (compiler default): t
 
 from __future__ import annotations
 
-import importlib.metadata
 import re
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-import mujoco
 import numpy as np
+
+from ...extras import require, require_distribution
+
+mujoco = require("mujoco", "talos", "the Talos kitchen")
 
 BASE_HEIGHT = 1.08305
 ROBOT_PREFIX = "talos/"
@@ -117,7 +119,7 @@ POT_HEIGHT = 0.10
 
 def talos_data_dir() -> Path:
     """Directory ``talos_data`` inside the installed example-robot-data wheel (6.0.0 layout)."""
-    dist = importlib.metadata.distribution("example-robot-data")
+    dist = require_distribution("example-robot-data", "talos", "the Talos kitchen (robot meshes)")
     root = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots/talos_data"))
     if not (root / "robots" / "talos_full_v2.urdf").is_file():
         raise FileNotFoundError(f"talos_full_v2.urdf not found under {root} (example-robot-data 6.0.0 expected)")
