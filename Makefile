@@ -3,7 +3,7 @@ PY := .venv/bin/python
 export HF_HUB_OFFLINE := 1
 export MUJOCO_GL := egl
 
-.PHONY: demo test test-fast test-slow bench
+.PHONY: demo test test-fast test-slow bench lint
 
 .venv/.installed: pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -12,8 +12,13 @@ demo: .venv/.installed
 	$(PY) -m lerobot_efm.demo
 
 # Everything, the slow tests too (two-process training, the long Talos task plans): what CI runs.
-test: .venv/.installed
+test: .venv/.installed lint
 	$(PY) -m pytest -q -m "slow or not slow"
+
+# LeRobot's house style (pyproject [tool.ruff]): lint and formatting, checked in CI before the tests.
+lint: .venv/.installed
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
 
 test-fast: .venv/.installed
 	$(PY) -m pytest -q

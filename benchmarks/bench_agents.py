@@ -34,7 +34,7 @@ import platform
 import statistics
 import sys
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -45,10 +45,11 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 if str(REPO_ROOT) not in sys.path:
     sys.path.insert(0, str(REPO_ROOT))
 
-import lerobot_efm  # noqa: E402,F401  (registers the efm_* policy types)
 from lerobot.configs.policies import PreTrainedConfig  # noqa: E402
 from lerobot.configs.types import FeatureType, PolicyFeature  # noqa: E402
 from lerobot.policies.factory import get_policy_class  # noqa: E402
+
+import lerobot_efm  # noqa: E402,F401  (registers the efm_* policy types)
 from lerobot_efm.configuration_efm import (  # noqa: E402
     GOAL_DISTANCE_KEY,
     GOAL_PREFIX,
@@ -73,7 +74,9 @@ CONFIGS = {
         "title": "state: planar push (4-D state, 2-D action, L_o/S_o 3/10, L_a/S_a 8/1, L_g 600)",
         "input_features": {"observation.state": PolicyFeature(FeatureType.STATE, (4,))},
         "action_dim": 2,
-        "overrides": dict(obs_traj_len=3, obs_traj_stride=10, action_traj_len=8, action_traj_stride=1, max_goal_distance=600),
+        "overrides": dict(
+            obs_traj_len=3, obs_traj_stride=10, action_traj_len=8, action_traj_stride=1, max_goal_distance=600
+        ),
         # The reference measured planar latency with 1 thread.
         "ref_latency_threads": 1,
     },
@@ -85,7 +88,12 @@ CONFIGS = {
         },
         "action_dim": 10,
         "overrides": dict(
-            obs_traj_len=3, obs_traj_stride=15, action_traj_len=16, action_traj_stride=3, max_goal_distance=1000, image_latent_dim=64
+            obs_traj_len=3,
+            obs_traj_stride=15,
+            action_traj_len=16,
+            action_traj_stride=3,
+            max_goal_distance=1000,
+            image_latent_dim=64,
         ),
         # The Talos latency was presumably measured with the 2 threads of the same machine.
         "ref_latency_threads": 2,
@@ -96,17 +104,28 @@ CONFIGS = {
 # 2-core CPU", torch 2.11, 2 threads). Keys: (policy type, use_rl).
 REFERENCE = {
     "state": {
-        "params_m": {("efm_gc", False): 3.42, ("efm_ac", False): 7.65, ("efm_pc", False): 9.82, ("efm_ps", False): 9.81, ("efm_as", False): 9.78},
+        "params_m": {
+            ("efm_gc", False): 3.42,
+            ("efm_ac", False): 7.65,
+            ("efm_pc", False): 9.82,
+            ("efm_ps", False): 9.81,
+            ("efm_as", False): 9.78,
+        },
         "steps_per_s": {
             ("efm_gc", False): 5.3,
-            ("efm_ac", False): 3.6, ("efm_ac", True): 1.4,
-            ("efm_pc", False): 3.6, ("efm_pc", True): 1.6,
-            ("efm_ps", False): 3.7, ("efm_ps", True): 1.4,
-            ("efm_as", False): 3.4, ("efm_as", True): 1.6,
+            ("efm_ac", False): 3.6,
+            ("efm_ac", True): 1.4,
+            ("efm_pc", False): 3.6,
+            ("efm_pc", True): 1.6,
+            ("efm_ps", False): 3.7,
+            ("efm_ps", True): 1.4,
+            ("efm_as", False): 3.4,
+            ("efm_as", True): 1.6,
         },
         "latency_ms": {
             ("efm_gc", False): 136.0,
-            ("efm_ac", False): 180.0, ("efm_ac", True): 194.0,
+            ("efm_ac", False): 180.0,
+            ("efm_ac", True): 194.0,
             ("efm_pc", False): 162.0,
             ("efm_ps", False): 448.0,
             ("efm_as", False): 810.0,
@@ -202,7 +221,9 @@ def check_batch_keys(cfg, batch: dict) -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-def measure_training(policy, cfg, batch, threads: int, train_steps: int, repeats: int, warmup: int = 3) -> dict:
+def measure_training(
+    policy, cfg, batch, threads: int, train_steps: int, repeats: int, warmup: int = 3
+) -> dict:
     """steps/s of lerobot-train's update_policy step (data loading excluded)."""
     torch.set_num_threads(threads)
     optimizer = cfg.get_optimizer_preset().build(policy.get_optim_params())
@@ -230,7 +251,6 @@ def measure_training(policy, cfg, batch, threads: int, train_steps: int, repeats
         timings.append(time.perf_counter() - start)
         cpu.append(time.process_time() - cpu_start)
     rates = [train_steps / t for t in timings]
-    del optimizer, scheduler
     return {
         "steps_per_s": statistics.median(rates),
         "steps_per_s_all": rates,
@@ -314,8 +334,8 @@ def render_markdown(results: dict) -> str:
         "",
         "* **train steps/s**: one step = `policy.forward(batch)` + `backward` + `clip_grad_norm_(…, 1.0)` + AdamW step "
         "(the policy's preset) + `zero_grad` + LR-scheduler step + `policy.update()` (EMA), i.e. lerobot-train's "
-        f"`update_policy`; **data loading excluded** (the reference's numbers include its data sampling, ~1% of a step). "
-        f"Median of `repeats` x `train-steps` steps after 3 warm-up steps, on one fixed synthetic batch "
+        "`update_policy`; **data loading excluded** (the reference's numbers include its data sampling, ~1% of a step). "
+        "Median of `repeats` x `train-steps` steps after 3 warm-up steps, on one fixed synthetic batch "
         "with the hindsight wrapper's keys (vectors U[-1,1], images U[0,1]).",
         "* **latency**: `policy.eval()`, batch 1, `policy.predict_action_chunk(obs)` (EMA weights, "
         f"{args['num_inference_steps']} Euler steps per flow, 64 candidates for FM-PS/AS), median of "
@@ -332,7 +352,11 @@ def render_markdown(results: dict) -> str:
         lines += [f"## {spec['title']}", ""]
         lines.append(
             f"Training: median of {cres['repeats']} x {cres['train_steps']} steps, batch {cres['batch_size']}"
-            + (f" (REDUCED from 128 with --image-batch: steps/s are not comparable with a batch-128 run)" if cres["batch_size"] != 128 else "")
+            + (
+                " (REDUCED from 128 with --image-batch: steps/s are not comparable with a batch-128 run)"
+                if cres["batch_size"] != 128
+                else ""
+            )
             + f"; reference latency measured at {ref_t} thread(s)."
         )
         lines.append("")
@@ -362,12 +386,19 @@ def render_markdown(results: dict) -> str:
             )
         rows = [f"{v['name']}: {v['train']['rows_per_step']:.0f}" for v in cres["variants"] if v.get("train")]
         if rows:
-            lines += ["", "Rows per training step (batch + 32 reached rows, + batch bootstrap rows with use-RL): " + ", ".join(rows) + "."]
+            lines += [
+                "",
+                "Rows per training step (batch + 32 reached rows, + batch bootstrap rows with use-RL): "
+                + ", ".join(rows)
+                + ".",
+            ]
         lines.append("")
     lines += [
         f"{CONTENDED} = the process got less than {CONTENTION_THRESHOLD:.0%} of the requested threads' CPU time during "
         "that measurement (process CPU time / (wall time x threads)): other processes were competing for the cores, "
-        "so the number is pessimistic. Load average at start: " + _fmt_load(machine["load_average_at_start"]) + ".",
+        "so the number is pessimistic. Load average at start: "
+        + _fmt_load(machine["load_average_at_start"])
+        + ".",
         "",
         "Raw timings (every repeat and call) are in the JSON file next to this report.",
         "",
@@ -385,21 +416,53 @@ def _fmt_load(load):
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--threads", type=int, default=2, help="torch threads for training and the main latency column")
-    p.add_argument("--repeats", type=int, default=3, help="timed repeats of --train-steps steps (median reported)")
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter
+    )
+    p.add_argument(
+        "--threads", type=int, default=2, help="torch threads for training and the main latency column"
+    )
+    p.add_argument(
+        "--repeats", type=int, default=3, help="timed repeats of --train-steps steps (median reported)"
+    )
     p.add_argument("--train-steps", type=int, default=30, help="training steps per timed repeat")
-    p.add_argument("--latency-calls", type=int, default=10, help="timed predict_action_chunk calls (median reported)")
-    p.add_argument("--agents", nargs="+", default=AGENT_TYPES, choices=AGENT_TYPES, help="policy types to benchmark")
-    p.add_argument("--rl", choices=["both", "no", "use"], default="both", help="use_rl variants of efm_ac/pc/ps/as")
+    p.add_argument(
+        "--latency-calls", type=int, default=10, help="timed predict_action_chunk calls (median reported)"
+    )
+    p.add_argument(
+        "--agents", nargs="+", default=AGENT_TYPES, choices=AGENT_TYPES, help="policy types to benchmark"
+    )
+    p.add_argument(
+        "--rl", choices=["both", "no", "use"], default="both", help="use_rl variants of efm_ac/pc/ps/as"
+    )
     p.add_argument("--configs", nargs="+", default=["state", "image"], choices=list(CONFIGS))
     p.add_argument("--batch", type=int, default=128, help="training batch size of the state config")
-    p.add_argument("--image-batch", type=int, default=128, help="training batch size of the image config (reduce if too slow)")
-    p.add_argument("--image-train-steps", type=int, default=None, help="--train-steps of the image config (default: --train-steps)")
-    p.add_argument("--num-inference-steps", type=int, default=20, help="Euler steps per flow at inference (reference: 20)")
+    p.add_argument(
+        "--image-batch",
+        type=int,
+        default=128,
+        help="training batch size of the image config (reduce if too slow)",
+    )
+    p.add_argument(
+        "--image-train-steps",
+        type=int,
+        default=None,
+        help="--train-steps of the image config (default: --train-steps)",
+    )
+    p.add_argument(
+        "--num-inference-steps",
+        type=int,
+        default=20,
+        help="Euler steps per flow at inference (reference: 20)",
+    )
     p.add_argument("--skip-train", action="store_true", help="latency only")
     p.add_argument("--skip-latency", action="store_true", help="training only")
-    p.add_argument("--out", type=Path, default=Path("benchmarks/results/agents_cpu.md"), help="markdown report; the JSON goes next to it")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("benchmarks/results/agents_cpu.md"),
+        help="markdown report; the JSON goes next to it",
+    )
     p.add_argument("--seed", type=int, default=0)
     return p.parse_args(argv)
 
@@ -425,29 +488,42 @@ def main(argv=None) -> dict:
     latency_threads = sorted({args.threads, 1}, reverse=True)
 
     results = {
-        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "command": " ".join([".venv/bin/python", "benchmarks/bench_agents.py", *(sys.argv[1:] if argv is None else argv)]),
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "command": " ".join(
+            [".venv/bin/python", "benchmarks/bench_agents.py", *(sys.argv[1:] if argv is None else argv)]
+        ),
         "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
         "machine": machine_info(args.threads),
         "configs": {},
     }
     for config_name in args.configs:
         batch_size = args.image_batch if config_name == "image" else args.batch
-        train_steps = args.image_train_steps if (config_name == "image" and args.image_train_steps) else args.train_steps
+        train_steps = (
+            args.image_train_steps
+            if (config_name == "image" and args.image_train_steps)
+            else args.train_steps
+        )
         cres = {"batch_size": batch_size, "train_steps": train_steps, "repeats": args.repeats, "variants": []}
         results["configs"][config_name] = cres
         for policy_type, use_rl in variants:
             name = variant_name(policy_type, use_rl)
             torch.manual_seed(args.seed)
             policy, cfg = build_policy(config_name, policy_type, use_rl, args.num_inference_steps)
-            v = {"name": name, "type": policy_type, "use_rl": use_rl, "params": count_params(policy.model),
-                 "params_by_component": {n: count_params(m) for n, m in policy.model.named_children()}}
+            v = {
+                "name": name,
+                "type": policy_type,
+                "use_rl": use_rl,
+                "params": count_params(policy.model),
+                "params_by_component": {n: count_params(m) for n, m in policy.model.named_children()},
+            }
             log(f"{config_name} / {name}: {v['params'] / 1e6:.2f} M params")
             if not args.skip_train:
                 batch = make_training_batch(cfg, batch_size, args.seed)
                 check_batch_keys(cfg, batch)
                 v["train"] = measure_training(policy, cfg, batch, args.threads, train_steps, args.repeats)
-                log(f"  train: {v['train']['steps_per_s']:.2f} steps/s  (repeats {[round(r, 2) for r in v['train']['steps_per_s_all']]})")
+                log(
+                    f"  train: {v['train']['steps_per_s']:.2f} steps/s  (repeats {[round(r, 2) for r in v['train']['steps_per_s_all']]})"
+                )
                 del batch
             if not args.skip_latency:
                 obs = make_inference_obs(cfg, args.seed + 1)

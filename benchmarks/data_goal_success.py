@@ -65,11 +65,11 @@ def sample_pairs(states, episodes, n, rng, min_gap=60, max_gap=400):
 
 
 def evaluate(checkpoint: Path, pairs, max_steps: int, device: str, overrides: dict | None = None) -> dict:
-    import lerobot_efm  # noqa: F401  (registers the policies)
     from lerobot.configs.policies import PreTrainedConfig
     from lerobot.policies import make_pre_post_processors
     from lerobot.policies.factory import get_policy_class
 
+    import lerobot_efm  # noqa: F401  (registers the policies)
     from lerobot_efm.envs.planar_push.env import PlanarPushEnv
 
     cfg = PreTrainedConfig.from_pretrained(checkpoint)
@@ -77,8 +77,11 @@ def evaluate(checkpoint: Path, pairs, max_steps: int, device: str, overrides: di
     for name, value in (overrides or {}).items():
         setattr(cfg, name, type(getattr(cfg, name))(value))
     policy = get_policy_class(cfg.type).from_pretrained(checkpoint, config=cfg).eval()
-    pre, post = make_pre_post_processors(policy_cfg=cfg, pretrained_path=str(checkpoint),
-                                         preprocessor_overrides={"device_processor": {"device": device}})
+    pre, post = make_pre_post_processors(
+        policy_cfg=cfg,
+        pretrained_path=str(checkpoint),
+        preprocessor_overrides={"device_processor": {"device": device}},
+    )
     envs = [PlanarPushEnv(task="pair0") for _ in pairs]
     for env, (start, goal) in zip(envs, pairs, strict=True):
         env.reset(options={"initial": start, "goal": goal})
@@ -103,25 +106,40 @@ def evaluate(checkpoint: Path, pairs, max_steps: int, device: str, overrides: di
             done[i] = info["is_success"]
         if done.all():
             break
-    return {"success": float(done.mean()), "disc_within_tol": float((closest_disc < SUCCESS_TOL).mean()),
-            "n": len(envs), "median_closest_sum_distance": float(np.median(closest)),
-            "median_closest_disc_distance": float(np.median(closest_disc)),
-            "trajectories": [np.stack(t).tolist() for t in trajectories], "goals": goals.tolist()}
+    return {
+        "success": float(done.mean()),
+        "disc_within_tol": float((closest_disc < SUCCESS_TOL).mean()),
+        "n": len(envs),
+        "median_closest_sum_distance": float(np.median(closest)),
+        "median_closest_disc_distance": float(np.median(closest_disc)),
+        "trajectories": [np.stack(t).tolist() for t in trajectories],
+        "goals": goals.tolist(),
+    }
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--checkpoint", type=Path, required=True)
     p.add_argument("--dataset", type=Path, help="the training recording to draw (start, goal) pairs from")
-    p.add_argument("--eval-pairs", type=int, default=0, metavar="REPS",
-                   help="instead of data goals: the 10 evaluation pairs, REPS episodes each (a re-check of lerobot-eval)")
+    p.add_argument(
+        "--eval-pairs",
+        type=int,
+        default=0,
+        metavar="REPS",
+        help="instead of data goals: the 10 evaluation pairs, REPS episodes each (a re-check of lerobot-eval)",
+    )
     p.add_argument("--episodes", type=int, default=50)
     p.add_argument("--max-steps", type=int, default=600)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu")
     p.add_argument("--out", type=Path)
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                   help="override a config field at inference, e.g. critic_inference_eps=0.5")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override a config field at inference, e.g. critic_inference_eps=0.5",
+    )
     a = p.parse_args()
     if a.eval_pairs > 0:
         from lerobot_efm.envs.planar_push.env import EVAL_PAIRS
@@ -133,8 +151,11 @@ def main() -> None:
         states, episodes = load_states(a.dataset)
         pairs = sample_pairs(states, episodes, a.episodes, np.random.default_rng(a.seed))
     overrides = dict(x.split("=", 1) for x in a.set)
-    result = {"checkpoint": str(a.checkpoint), "dataset": str(a.dataset),
-              **evaluate(a.checkpoint, pairs, a.max_steps, a.device, overrides)}
+    result = {
+        "checkpoint": str(a.checkpoint),
+        "dataset": str(a.dataset),
+        **evaluate(a.checkpoint, pairs, a.max_steps, a.device, overrides),
+    }
     print(json.dumps({k: v for k, v in result.items() if k not in ("trajectories", "goals")}))
     if a.out:
         a.out.write_text(json.dumps(result, indent=1) + "\n")

@@ -175,7 +175,9 @@ DISTRIBUTIONS: dict[str, Distribution] = {
 # --------------------------------------------------------------------------------------------------
 
 
-def _train(model: nn.Module, dist: Distribution, steps: int, batch_size: int, lr: float, gen: torch.Generator) -> None:
+def _train(
+    model: nn.Module, dist: Distribution, steps: int, batch_size: int, lr: float, gen: torch.Generator
+) -> None:
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     for _ in range(steps):
         loss = model.loss(*dist.sample(batch_size, gen))
@@ -200,9 +202,13 @@ def fit_and_estimate(
     out: dict[str, dict[str, np.ndarray]] = {}
     torch.manual_seed(seed)  # initialisation and the Critic's internal (x_src, t) draws
     critic = Critic(cond_dim=1, num_critics=1, hidden_dims=hidden_dims)
-    _train(critic, dist, steps, batch_size, lr, torch.Generator().manual_seed(seed))  # same data stream for both
+    _train(
+        critic, dist, steps, batch_size, lr, torch.Generator().manual_seed(seed)
+    )  # same data stream for both
     with torch.no_grad():
-        out["flow"] = {b: critic.query(c, eps, euler_steps)[0].numpy() for b, eps in (("min", 0.0), ("max", 1.0))}
+        out["flow"] = {
+            b: critic.query(c, eps, euler_steps)[0].numpy() for b, eps in (("min", 0.0), ("max", 1.0))
+        }
     torch.manual_seed(seed)
     net = ExpectileNet(hidden_dims)
     _train(net, dist, steps, batch_size, lr, torch.Generator().manual_seed(seed))
@@ -308,7 +314,11 @@ def plot(bench: dict, path: Path, n_points: int = 3000) -> None:
     grid = bench["grid"]
     fig, axes = plt.subplots(1, len(results), figsize=(5.2 * len(results), 4.4), squeeze=False)
     for ax, (name, e) in zip(axes[0], results.items(), strict=True):
-        c, x = DISTRIBUTIONS[name].sample(n_points, torch.Generator().manual_seed(123)) if name in DISTRIBUTIONS else (None, None)
+        c, x = (
+            DISTRIBUTIONS[name].sample(n_points, torch.Generator().manual_seed(123))
+            if name in DISTRIBUTIONS
+            else (None, None)
+        )
         if c is not None:
             ax.scatter(c[:, 0], x, s=2, c="0.6", alpha=0.5, label="samples (c, x)", rasterized=True)
         lo, hi = e["truth"]
@@ -355,7 +365,13 @@ def main(argv: list[str] | None = None) -> None:
     elapsed = time.perf_counter() - t0
     args.out_dir.mkdir(parents=True, exist_ok=True)
     plot(bench, args.out_dir / "extremum_vs_expectile.png")
-    cmd = " ".join([".venv/bin/python", "benchmarks/extremum_vs_expectile.py", *(argv if argv is not None else sys.argv[1:])])
+    cmd = " ".join(
+        [
+            ".venv/bin/python",
+            "benchmarks/extremum_vs_expectile.py",
+            *(argv if argv is not None else sys.argv[1:]),
+        ]
+    )
     dists = "\n".join(f"- `{d.name}`: {d.description}" for d in DISTRIBUTIONS.values())
     report = f"""# Extremum Flow Matching vs Expectile Regression (paper Fig. 3)
 

@@ -31,8 +31,8 @@ committed JSON of an earlier report with the same budget).
 from __future__ import annotations
 
 import argparse
-import importlib
 import concurrent.futures as cf
+import importlib
 import json
 import os
 import platform
@@ -42,7 +42,7 @@ import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -82,15 +82,21 @@ class Suite:
     full_eval_episodes: int
     cpu_eval_episodes: int
     episodes_note: str
-    progress_note: str = ""  # the env runs with --env.reward=progress: what its sum_reward (closed share) measures
+    progress_note: str = (
+        ""  # the env runs with --env.reward=progress: what its sum_reward (closed share) measures
+    )
     reference: str = ""  # "module:function" returning a scripted reference's {"pc_success", "pc_closed"}
     reference_name: str = ""
 
 
 # Fig. 5 (OGBench success %, single run per cell in the paper); only the datasets we can generate offline.
 OGBENCH_PAPER = {
-    "pointmaze-large-navigate-v0": dict(gc=66, ac=60, pc=60, ps=31, **{"as": 29}, ac_rl=89, pc_rl=89, ps_rl=67, as_rl=64),
-    "pointmaze-large-stitch-v0": dict(gc=39, ac=37, pc=23, ps=15, **{"as": 14}, ac_rl=40, pc_rl=40, ps_rl=42, as_rl=44),
+    "pointmaze-large-navigate-v0": dict(
+        gc=66, ac=60, pc=60, ps=31, **{"as": 29}, ac_rl=89, pc_rl=89, ps_rl=67, as_rl=64
+    ),
+    "pointmaze-large-stitch-v0": dict(
+        gc=39, ac=37, pc=23, ps=15, **{"as": 14}, ac_rl=40, pc_rl=40, ps_rl=42, as_rl=44
+    ),
 }
 # Fig. 7 (planar push final success %, mean ± std over 4 runs x 8 seeds): Expert / Full / Partitioned.
 PLANAR_PAPER_ROWS = {
@@ -115,7 +121,10 @@ SUITES: dict[str, Suite] = {
         config="ogbench_pointmaze_efm.json",
         env_args=("--env.type=ogbench", "--env.task=all", "--env.reward=progress"),
         datasets=OGBENCH_DATASETS,
-        dataset_columns={"pointmaze-large-navigate-v0": "pointmaze-large-navigate", "pointmaze-large-stitch-v0": "pointmaze-large-stitch"},
+        dataset_columns={
+            "pointmaze-large-navigate-v0": "pointmaze-large-navigate",
+            "pointmaze-large-stitch-v0": "pointmaze-large-stitch",
+        },
         num_tasks=5,
         task_prefix="task",
         first_task=1,
@@ -127,7 +136,7 @@ SUITES: dict[str, Suite] = {
         progress_note="1 - C_end / C_0, C = maze cells between the point and the goal along OGBench's BFS map",
         reference="lerobot_efm.ogbench.generate:evaluate_oracle",
         reference_name="the noise-free BFS oracle (`oracle_direction`, privileged maze map; navigate and stitch "
-                       "share the maze and its five tasks)",
+        "share the maze and its five tasks)",
     ),
     "planar_push": Suite(
         name="planar_push",
@@ -152,6 +161,7 @@ SUITES: dict[str, Suite] = {
 
 # ------------------------------------------------------------------------------------------- helpers
 
+
 def parse_list(values: list[str] | None, valid: tuple[str, ...] | list[str], what: str) -> list[str]:
     """``all`` or names (space- or comma-separated) -> list in ``valid``'s order; unknown names raise."""
     names = [n for v in (values or ["all"]) for n in v.replace(",", " ").split()]
@@ -165,28 +175,36 @@ def parse_list(values: list[str] | None, valid: tuple[str, ...] | list[str], wha
 
 def run_logged(cmd: list[str], log: Path, cwd: Path = REPO_ROOT) -> float:
     """Run ``cmd`` with its output in ``log``; returns the wall time. Raises with the log tail on failure."""
-    env = {**os.environ, "HF_HUB_OFFLINE": os.environ.get("HF_HUB_OFFLINE", "1"),
-           "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    env = {
+        **os.environ,
+        "HF_HUB_OFFLINE": os.environ.get("HF_HUB_OFFLINE", "1"),
+        "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+    }
     log.parent.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     with log.open("w") as out:
         proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env, cwd=cwd)
     wall = time.perf_counter() - start
     if proc.returncode:
-        raise RuntimeError(f"{Path(cmd[0]).name} failed (exit {proc.returncode}); log {log}:\n{log.read_text()[-2500:]}")
+        raise RuntimeError(
+            f"{Path(cmd[0]).name} failed (exit {proc.returncode}); log {log}:\n{log.read_text()[-2500:]}"
+        )
     return wall
 
 
 def shell(cmd: list[str]) -> str:
     """A command as one would type it (paths relative to the repo root where possible)."""
+
     def rel(a: str) -> str:
         for prefix in (str(BIN) + os.sep, str(REPO_ROOT) + os.sep):
             a = a.replace(prefix, "")
         return a
+
     return " ".join(shlex.quote(rel(a)) for a in cmd)
 
 
 # ------------------------------------------------------------------------------------------- datasets
+
 
 @dataclass
 class DataSpec:
@@ -215,19 +233,39 @@ def dataset_root(data_root: Path, suite: str, dataset: str, spec: DataSpec) -> P
 def generate_command(suite: str, dataset: str, root: Path, spec: DataSpec) -> list[str]:
     py = [sys.executable, "-m"]
     if suite == "ogbench":
-        cmd = [*py, "lerobot_efm.ogbench.generate", "--dataset", dataset, "--root", str(root),
-               "--repo-id", dataset_repo_id(suite, dataset)]
+        cmd = [
+            *py,
+            "lerobot_efm.ogbench.generate",
+            "--dataset",
+            dataset,
+            "--root",
+            str(root),
+            "--repo-id",
+            dataset_repo_id(suite, dataset),
+        ]
         if spec.ogbench_episodes:
             cmd += ["--episodes", str(spec.ogbench_episodes)]
         if spec.ogbench_episode_steps:
             cmd += ["--episode-steps", str(spec.ogbench_episode_steps)]
         return cmd
     frames = spec.planar_frames or PLANAR_FRAMES[dataset]
-    return [*py, "lerobot_efm.envs.planar_push.demonstrators", "--behaviour", dataset, "--root", str(root),
-            "--frames", str(frames), "--repo-id", dataset_repo_id(suite, dataset)]
+    return [
+        *py,
+        "lerobot_efm.envs.planar_push.demonstrators",
+        "--behaviour",
+        dataset,
+        "--root",
+        str(root),
+        "--frames",
+        str(frames),
+        "--repo-id",
+        dataset_repo_id(suite, dataset),
+    ]
 
 
-def ensure_dataset(suite: str, dataset: str, data_root: Path, spec: DataSpec) -> tuple[Path, str | None, float]:
+def ensure_dataset(
+    suite: str, dataset: str, data_root: Path, spec: DataSpec
+) -> tuple[Path, str | None, float]:
     """Generate the dataset unless ``meta/info.json`` exists; returns (root, generating command, seconds).
 
     A cached dataset reports the command and time saved next to it when it was generated (else None, 0)."""
@@ -254,17 +292,24 @@ def dataset_provenance(root: Path) -> tuple[str | None, float]:
     return saved.get("command"), float(saved.get("seconds", 0.0))
 
 
-def import_report(report: Path, suite_name: str, budget: "Budget", run_root: Path) -> dict[str, dict]:
+def import_report(report: Path, suite_name: str, budget: Budget, run_root: Path) -> dict[str, dict]:
     """Write the cells of an earlier report's JSON (e.g. the committed one) as finished cells of this budget.
 
     Lets a fresh checkout add cells to committed results without re-running them; cells already on disk win.
     Returns the report's dataset notes (provenance of datasets that may no longer exist here)."""
     payload = json.loads(report.read_text())
     ours = json.loads(json.dumps(asdict(budget)))
-    theirs = {"config": None, "seed": 1000, "curve_points": 1, **(payload.get("budget") or {})}  # older reports
+    theirs = {
+        "config": None,
+        "seed": 1000,
+        "curve_points": 1,
+        **(payload.get("budget") or {}),
+    }  # older reports
     if payload.get("suite") != suite_name or theirs != ours:
-        raise ValueError(f"--import-report {report}: its suite {payload.get('suite')!r} and budget "
-                         f"{theirs} must equal this run's {suite_name!r} and {ours}")
+        raise ValueError(
+            f"--import-report {report}: its suite {payload.get('suite')!r} and budget "
+            f"{theirs} must equal this run's {suite_name!r} and {ours}"
+        )
     for cell in payload["cells"]:
         path = run_root / cell["dataset"] / cell["variant"] / RESULT_FILE
         if not cell.get("error") and not path.exists():
@@ -275,6 +320,7 @@ def import_report(report: Path, suite_name: str, budget: "Budget", run_root: Pat
 
 # ------------------------------------------------------------------------------------------- one cell
 
+
 @dataclass
 class Budget:
     device: str
@@ -282,7 +328,9 @@ class Budget:
     batch_size: int
     eval_episodes: int
     eval_batch_size: int
-    eval_async: bool  # AsyncVectorEnv: one process per env, each importing MuJoCo (minutes on a busy 2-core CPU)
+    eval_async: (
+        bool  # AsyncVectorEnv: one process per env, each importing MuJoCo (minutes on a busy 2-core CPU)
+    )
     ema_cutoff: float | None  # None: the config's (paper) value
     num_workers: int | None
     train_args: list[str] = field(default_factory=list)  # extra lerobot-train arguments (e.g. tiny networks)
@@ -300,14 +348,25 @@ def load_config(suite: Suite, budget: Budget) -> dict:
     return json.loads((REPO_ROOT / "train_configs" / config_name(suite, budget)).read_text())
 
 
-def train_command(suite: Suite, variant: str, data: Path, repo_id: str, out: Path, budget: Budget) -> list[str]:
+def train_command(
+    suite: Suite, variant: str, data: Path, repo_id: str, out: Path, budget: Budget
+) -> list[str]:
     policy_type, use_rl, _ = VARIANTS[variant]
-    cmd = [str(BIN / "lerobot-train"), f"--config_path={REPO_ROOT / 'train_configs' / config_name(suite, budget)}",
-           f"--policy.type={policy_type}", f"--policy.use_rl={str(use_rl).lower()}",
-           f"--dataset.repo_id={repo_id}", f"--dataset.root={data}", f"--output_dir={out}",
-           f"--policy.device={budget.device}", f"--steps={budget.steps}", f"--seed={budget.seed}",
-           f"--save_freq={curve_step(budget, 1)}",
-           f"--batch_size={budget.batch_size}", f"--log_freq={max(1, min(1000, budget.steps // 20))}"]
+    cmd = [
+        str(BIN / "lerobot-train"),
+        f"--config_path={REPO_ROOT / 'train_configs' / config_name(suite, budget)}",
+        f"--policy.type={policy_type}",
+        f"--policy.use_rl={str(use_rl).lower()}",
+        f"--dataset.repo_id={repo_id}",
+        f"--dataset.root={data}",
+        f"--output_dir={out}",
+        f"--policy.device={budget.device}",
+        f"--steps={budget.steps}",
+        f"--seed={budget.seed}",
+        f"--save_freq={curve_step(budget, 1)}",
+        f"--batch_size={budget.batch_size}",
+        f"--log_freq={max(1, min(1000, budget.steps // 20))}",
+    ]
     if budget.ema_cutoff is not None:
         cmd.append(f"--policy.ema_cutoff={budget.ema_cutoff:g}")
     if budget.num_workers is not None:
@@ -322,13 +381,23 @@ def curve_step(budget: Budget, k: int) -> int:
 
 def eval_command(suite: Suite, dataset: str, checkpoint: Path, out: Path, budget: Budget) -> list[str]:
     env = list(suite.env_args) + ([f"--env.dataset={dataset}"] if suite.name == "ogbench" else [])
-    return [str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", *env,
-            f"--eval.n_episodes={budget.eval_episodes}", f"--eval.batch_size={budget.eval_batch_size}",
-            f"--eval.use_async_envs={str(budget.eval_async).lower()}",
-            f"--policy.device={budget.device}", f"--seed={EVAL_SEED}", f"--output_dir={out}", *budget.eval_args]
+    return [
+        str(BIN / "lerobot-eval"),
+        f"--policy.path={checkpoint}",
+        *env,
+        f"--eval.n_episodes={budget.eval_episodes}",
+        f"--eval.batch_size={budget.eval_batch_size}",
+        f"--eval.use_async_envs={str(budget.eval_async).lower()}",
+        f"--policy.device={budget.device}",
+        f"--seed={EVAL_SEED}",
+        f"--output_dir={out}",
+        *budget.eval_args,
+    ]
 
 
-def parse_eval_info(info: dict, num_tasks: int, task_prefix: str, first_task: int, seed: int = EVAL_SEED) -> dict:
+def parse_eval_info(
+    info: dict, num_tasks: int, task_prefix: str, first_task: int, seed: int = EVAL_SEED
+) -> dict:
     """``eval_info.json`` -> success % overall and per evaluation task.
 
     With ``--env.task=all`` lerobot-eval reports one task holding per-episode ``successes``; episode i ran
@@ -340,20 +409,34 @@ def parse_eval_info(info: dict, num_tasks: int, task_prefix: str, first_task: in
         successes = [bool(s) for task in info["per_task"] for s in task["metrics"]["successes"]]
         rewards = [float(r) for task in info["per_task"] for r in task["metrics"]["sum_rewards"]]
     except (KeyError, TypeError) as err:
-        raise ValueError(f"eval_info.json lacks {err}; expected overall.pc_success, overall.n_episodes and "
-                         f"per_task[i].metrics.successes / sum_rewards") from err
+        raise ValueError(
+            f"eval_info.json lacks {err}; expected overall.pc_success, overall.n_episodes and "
+            f"per_task[i].metrics.successes / sum_rewards"
+        ) from err
     if len(successes) != n or len(rewards) != n:
-        raise ValueError(f"eval_info.json: overall.n_episodes={n} but per_task holds {len(successes)} successes "
-                         f"and {len(rewards)} sum_rewards")
-    out = {"pc_success": pc, "n_episodes": n, "n_success": int(sum(successes)),
-           "mean_sum_reward": sum(rewards) / n if n else None, "per_task": None}
+        raise ValueError(
+            f"eval_info.json: overall.n_episodes={n} but per_task holds {len(successes)} successes "
+            f"and {len(rewards)} sum_rewards"
+        )
+    out = {
+        "pc_success": pc,
+        "n_episodes": n,
+        "n_success": int(sum(successes)),
+        "mean_sum_reward": sum(rewards) / n if n else None,
+        "per_task": None,
+    }
     if n:
         per: dict[str, list[int]] = {}
         for i in range(n):
             per.setdefault(f"{task_prefix}{first_task + (seed + i) % num_tasks}", []).append(i)
-        out["per_task"] = {k: {"pc_success": 100.0 * sum(successes[i] for i in idx) / len(idx), "n_episodes": len(idx),
-                               "mean_sum_reward": sum(rewards[i] for i in idx) / len(idx)}
-                           for k, idx in sorted(per.items())}
+        out["per_task"] = {
+            k: {
+                "pc_success": 100.0 * sum(successes[i] for i in idx) / len(idx),
+                "n_episodes": len(idx),
+                "mean_sum_reward": sum(rewards[i] for i in idx) / len(idx),
+            }
+            for k, idx in sorted(per.items())
+        }
     return out
 
 
@@ -367,40 +450,69 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
     tcmd = train_command(suite, variant, data, dataset_repo_id(suite.name, dataset), train_dir, budget)
     train_time = cell_dir / "train_seconds.txt"  # kept for re-evaluations of a finished training
     if not (checkpoint / "model.safetensors").exists():
-        shutil.rmtree(train_dir, ignore_errors=True)  # an interrupted training: lerobot-train refuses to overwrite
+        shutil.rmtree(
+            train_dir, ignore_errors=True
+        )  # an interrupted training: lerobot-train refuses to overwrite
         print(f"[{suite.name}/{dataset}/{variant}] training: {shell(tcmd)}", flush=True)
         train_time.write_text(f"{run_logged(tcmd, cell_dir / 'train.log'):.1f}\n")
     train_s = float(train_time.read_text()) if train_time.exists() else None
     curve = []
     for k in range(1, budget.curve_points):  # intermediate checkpoints, each evaluated once (resumable)
         step = curve_step(budget, k)
-        point = evaluate_checkpoint(suite, dataset, train_dir / "checkpoints" / f"{step:06d}" / "pretrained_model",
-                                    cell_dir / f"eval_{step:06d}", budget, f"{suite.name}/{dataset}/{variant}@{step}")
+        point = evaluate_checkpoint(
+            suite,
+            dataset,
+            train_dir / "checkpoints" / f"{step:06d}" / "pretrained_model",
+            cell_dir / f"eval_{step:06d}",
+            budget,
+            f"{suite.name}/{dataset}/{variant}@{step}",
+        )
         curve.append(curve_point(point, step, budget, train_s))
     shutil.rmtree(eval_dir, ignore_errors=True)
     ecmd = eval_command(suite, dataset, checkpoint, eval_dir, budget)
     print(f"[{suite.name}/{dataset}/{variant}] evaluating: {shell(ecmd)}", flush=True)
     eval_s = run_logged(ecmd, cell_dir / "eval.log")
-    metrics = parse_eval_info(json.loads((eval_dir / "eval_info.json").read_text()), suite.num_tasks,
-                              suite.task_prefix, suite.first_task, EVAL_SEED)
+    metrics = parse_eval_info(
+        json.loads((eval_dir / "eval_info.json").read_text()),
+        suite.num_tasks,
+        suite.task_prefix,
+        suite.first_task,
+        EVAL_SEED,
+    )
     curve.append(curve_point(metrics, budget.steps, budget, train_s))
     result = {
-        "suite": suite.name, "variant": variant, "agent": VARIANTS[variant][2], "policy_type": VARIANTS[variant][0],
-        "use_rl": VARIANTS[variant][1], "dataset": dataset, **metrics,
-        "paper": suite.paper[variant][dataset], "steps": budget.steps, "batch_size": budget.batch_size,
-        "device": budget.device, "train_s": train_s, "eval_s": eval_s, "seed": budget.seed,
+        "suite": suite.name,
+        "variant": variant,
+        "agent": VARIANTS[variant][2],
+        "policy_type": VARIANTS[variant][0],
+        "use_rl": VARIANTS[variant][1],
+        "dataset": dataset,
+        **metrics,
+        "paper": suite.paper[variant][dataset],
+        "steps": budget.steps,
+        "batch_size": budget.batch_size,
+        "device": budget.device,
+        "train_s": train_s,
+        "eval_s": eval_s,
+        "seed": budget.seed,
         "config": f"train_configs/{config_name(suite, budget)}",
-        "steps_per_s": round(budget.steps / train_s, 2) if train_s else None, "curve": curve,
-        "train_command": shell(tcmd), "eval_command": shell(ecmd),
-        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "steps_per_s": round(budget.steps / train_s, 2) if train_s else None,
+        "curve": curve,
+        "train_command": shell(tcmd),
+        "eval_command": shell(ecmd),
+        "finished": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     result_path.write_text(json.dumps(result, indent=2))
-    print(f"[{suite.name}/{dataset}/{variant}] success {metrics['pc_success']:.0f}% "
-          f"(paper {result['paper']})", flush=True)
+    print(
+        f"[{suite.name}/{dataset}/{variant}] success {metrics['pc_success']:.0f}% (paper {result['paper']})",
+        flush=True,
+    )
     return result
 
 
-def evaluate_checkpoint(suite: Suite, dataset: str, checkpoint: Path, eval_dir: Path, budget: Budget, name: str) -> dict:
+def evaluate_checkpoint(
+    suite: Suite, dataset: str, checkpoint: Path, eval_dir: Path, budget: Budget, name: str
+) -> dict:
     """lerobot-eval of one intermediate checkpoint; its metrics are cached in ``eval_dir/metrics.json``."""
     cached = eval_dir / "metrics.json"
     if cached.exists():
@@ -409,8 +521,13 @@ def evaluate_checkpoint(suite: Suite, dataset: str, checkpoint: Path, eval_dir: 
     ecmd = eval_command(suite, dataset, checkpoint, eval_dir / "lerobot_eval", budget)
     print(f"[{name}] evaluating: {shell(ecmd)}", flush=True)
     run_logged(ecmd, eval_dir / "eval.log")
-    metrics = parse_eval_info(json.loads((eval_dir / "lerobot_eval" / "eval_info.json").read_text()),
-                              suite.num_tasks, suite.task_prefix, suite.first_task, EVAL_SEED)
+    metrics = parse_eval_info(
+        json.loads((eval_dir / "lerobot_eval" / "eval_info.json").read_text()),
+        suite.num_tasks,
+        suite.task_prefix,
+        suite.first_task,
+        EVAL_SEED,
+    )
     cached.write_text(json.dumps(metrics, indent=2))
     return metrics
 
@@ -419,17 +536,24 @@ def curve_point(metrics: dict, step: int, budget: Budget, train_s: float | None)
     """One point of the learning curve. CPU minutes of training up to ``step`` assume the constant step rate
     of the whole run (checkpoint saving aside, LeRobot's training loop does the same work every step)."""
     minutes = None if train_s is None else round(train_s * step / budget.steps / 60.0, 2)
-    return {"step": step, "train_min": minutes, "pc_success": metrics["pc_success"],
-            "mean_sum_reward": metrics["mean_sum_reward"]}
+    return {
+        "step": step,
+        "train_min": minutes,
+        "pc_success": metrics["pc_success"],
+        "mean_sum_reward": metrics["mean_sum_reward"],
+    }
 
 
 # ------------------------------------------------------------------------------------------- report
+
 
 def fmt_pct(value: float | None) -> str:
     return "–" if value is None else f"{value:.0f}"
 
 
-def results_table(suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]) -> str:
+def results_table(
+    suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]
+) -> str:
     """Rows = variants, one column per dataset: ``ours (paper)`` success %."""
     head = "| agent | " + " | ".join(f"{suite.dataset_columns[d]}: ours | paper" for d in datasets) + " |"
     sep = "|---|" + "---:|---:|" * len(datasets)
@@ -438,16 +562,22 @@ def results_table(suite: Suite, variants: list[str], datasets: list[str], cells:
         parts = []
         for d in datasets:
             cell = cells.get((v, d))
-            ours = "failed" if cell and cell.get("error") else fmt_pct(cell.get("pc_success") if cell else None)
+            ours = (
+                "failed" if cell and cell.get("error") else fmt_pct(cell.get("pc_success") if cell else None)
+            )
             parts.append(f"{ours} | {suite.paper[v][d]}")
         rows.append(f"| {VARIANTS[v][2]} | " + " | ".join(parts) + " |")
     return "\n".join(rows)
 
 
-def progress_table(suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]) -> str:
+def progress_table(
+    suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]
+) -> str:
     """Rows = variants: mean share (%) of the initial goal distance closed at the end of the episode."""
-    rows = ["| agent | " + " | ".join(suite.dataset_columns[d] for d in datasets) + " |",
-            "|---|" + "---:|" * len(datasets)]
+    rows = [
+        "| agent | " + " | ".join(suite.dataset_columns[d] for d in datasets) + " |",
+        "|---|" + "---:|" * len(datasets),
+    ]
     for v in variants:
         values = []
         for d in datasets:
@@ -457,23 +587,37 @@ def progress_table(suite: Suite, variants: list[str], datasets: list[str], cells
     return "\n".join(rows)
 
 
-def per_task_table(suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]) -> str:
+def per_task_table(
+    suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]
+) -> str:
     lines = []
     for d in datasets:
-        tasks = sorted({t for v in variants for t in ((cells.get((v, d)) or {}).get("per_task") or {})},
-                       key=lambda t: int(t[len(suite.task_prefix):]))
+        tasks = sorted(
+            {t for v in variants for t in ((cells.get((v, d)) or {}).get("per_task") or {})},
+            key=lambda t: int(t[len(suite.task_prefix) :]),
+        )
         if not tasks:
             continue
-        lines += [f"**{suite.dataset_columns[d]}**", "", "| agent | " + " | ".join(tasks) + " |",
-                  "|---|" + "---:|" * len(tasks)]
+        lines += [
+            f"**{suite.dataset_columns[d]}**",
+            "",
+            "| agent | " + " | ".join(tasks) + " |",
+            "|---|" + "---:|" * len(tasks),
+        ]
         for v in variants:
             per = (cells.get((v, d)) or {}).get("per_task") or {}
-            lines.append(f"| {VARIANTS[v][2]} | " + " | ".join(fmt_pct(per.get(t, {}).get("pc_success")) for t in tasks) + " |")
+            lines.append(
+                f"| {VARIANTS[v][2]} | "
+                + " | ".join(fmt_pct(per.get(t, {}).get("pc_success")) for t in tasks)
+                + " |"
+            )
         lines.append("")
     return "\n".join(lines)
 
 
-def curve_table(suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]) -> str:
+def curve_table(
+    suite: Suite, variants: list[str], datasets: list[str], cells: dict[tuple[str, str], dict]
+) -> str:
     """One row per cell with a learning curve: success (training minutes) per checkpoint, and the step rate."""
     rows = []
     for d in datasets:
@@ -483,34 +627,55 @@ def curve_table(suite: Suite, variants: list[str], datasets: list[str], cells: d
             if len(curve) < 2:
                 continue
             if not rows:
-                rows = ["| dataset | agent | " + " | ".join(f"step {p['step']}" for p in curve) + " | steps/s |",
-                        "|---|---|" + "---:|" * (len(curve) + 1)]
-            points = " | ".join(f"{p['pc_success']:.0f} ({p['train_min']:.0f} min)" if p.get("train_min") is not None
-                                else f"{p['pc_success']:.0f}" for p in curve)
-            rows.append(f"| {suite.dataset_columns[d]} | {VARIANTS[v][2]} | {points} | {cell.get('steps_per_s') or '–'} |")
+                rows = [
+                    "| dataset | agent | " + " | ".join(f"step {p['step']}" for p in curve) + " | steps/s |",
+                    "|---|---|" + "---:|" * (len(curve) + 1),
+                ]
+            points = " | ".join(
+                f"{p['pc_success']:.0f} ({p['train_min']:.0f} min)"
+                if p.get("train_min") is not None
+                else f"{p['pc_success']:.0f}"
+                for p in curve
+            )
+            rows.append(
+                f"| {suite.dataset_columns[d]} | {VARIANTS[v][2]} | {points} | {cell.get('steps_per_s') or '–'} |"
+            )
     return "\n".join(rows)
 
 
 def gpu_command(suite: Suite) -> str:
-    return (f".venv/bin/python benchmarks/paper_experiments.py --suite {suite.name} --variants all --datasets all "
-            f"--device cuda --steps {FULL_STEPS} --batch-size {FULL_BATCH} --eval-episodes {suite.full_eval_episodes} "
-            f"--jobs 3 --out benchmarks/results/paper_experiments_{suite.name}_gpu.md")
+    return (
+        f".venv/bin/python benchmarks/paper_experiments.py --suite {suite.name} --variants all --datasets all "
+        f"--device cuda --steps {FULL_STEPS} --batch-size {FULL_BATCH} --eval-episodes {suite.full_eval_episodes} "
+        f"--jobs 3 --out benchmarks/results/paper_experiments_{suite.name}_gpu.md"
+    )
 
 
-def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[str], cells: dict, budget: Budget,
-                 argv: list[str], datasets_info: dict, wall_s: float) -> None:
+def write_report(
+    out: Path,
+    suite: Suite,
+    variants: list[str],
+    datasets: list[str],
+    cells: dict,
+    budget: Budget,
+    argv: list[str],
+    datasets_info: dict,
+    wall_s: float,
+) -> None:
     full = budget.steps >= FULL_STEPS and budget.batch_size >= FULL_BATCH
     cfg = load_config(suite, budget)
     ema = budget.ema_cutoff if budget.ema_cutoff is not None else cfg["policy"]["ema_cutoff"]
-    budget_line = (f"**Budget: {budget.steps} training steps at batch {budget.batch_size} on `{budget.device}`** "
-                   f"({'the paper budget' if full else f'the paper trains {FULL_STEPS} steps at batch {FULL_BATCH}'}), "
-                   f"EMA cutoff {ema:g} updates, evaluation {budget.eval_episodes} episodes per cell "
-                   f"(batch {budget.eval_batch_size}) on {suite.episodes_note}, eval seed {EVAL_SEED}.")
+    budget_line = (
+        f"**Budget: {budget.steps} training steps at batch {budget.batch_size} on `{budget.device}`** "
+        f"({'the paper budget' if full else f'the paper trains {FULL_STEPS} steps at batch {FULL_BATCH}'}), "
+        f"EMA cutoff {ema:g} updates, evaluation {budget.eval_episodes} episodes per cell "
+        f"(batch {budget.eval_batch_size}) on {suite.episodes_note}, eval seed {EVAL_SEED}."
+    )
     failed = [f"{d}/{v}" for (v, d), c in cells.items() if c.get("error")]
     md = [
         f"# Paper agent comparison: {suite.name}",
         "",
-        f"Generated {datetime.now(timezone.utc).isoformat(timespec='seconds')} by",
+        f"Generated {datetime.now(UTC).isoformat(timespec='seconds')} by",
         "",
         "```bash",
         f".venv/bin/python benchmarks/paper_experiments.py {shlex.join(argv)}",
@@ -531,56 +696,101 @@ def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[st
         "",
     ]
     if not full:
-        md += ["Our numbers come from a much smaller budget than the paper's and a single seed: they check that the "
-               "pipeline trains and evaluates every agent, not the paper's ranking.", ""]
+        md += [
+            "Our numbers come from a much smaller budget than the paper's and a single seed: they check that the "
+            "pipeline trains and evaluates every agent, not the paper's ranking.",
+            "",
+        ]
     if failed:
         md += [f"Failed cells (see their `train.log` / `eval.log`): {', '.join(failed)}.", ""]
     if len(cells) < len(variants) * len(datasets):
         md += ["`–`: not run at this budget.", ""]
     if suite.progress_note and any(c.get("mean_sum_reward") is not None for c in cells.values()):
-        md += ["## Goal distance closed (%)", "",
-               f"Mean over episodes of {suite.progress_note}: lerobot-eval's `sum_reward` under "
-               "`--env.reward=progress`. 100 = on the goal, 0 = no closer than at the start (holding still), "
-               "negative = further away. A graded score for budgets too small for successes; the paper reports "
-               "success only.", "",
-               progress_table(suite, variants, datasets, cells), ""]
+        md += [
+            "## Goal distance closed (%)",
+            "",
+            f"Mean over episodes of {suite.progress_note}: lerobot-eval's `sum_reward` under "
+            "`--env.reward=progress`. 100 = on the goal, 0 = no closer than at the start (holding still), "
+            "negative = further away. A graded score for budgets too small for successes; the paper reports "
+            "success only.",
+            "",
+            progress_table(suite, variants, datasets, cells),
+            "",
+        ]
         if suite.reference:
             module, func = suite.reference.split(":")
             ref = getattr(importlib.import_module(module), func)()
-            md += [f"Reference, measured now: {suite.reference_name}, same protocol: {ref['pc_success']:.0f} % "
-                   f"success, {ref['pc_closed']:.0f} % closed.", ""]
+            md += [
+                f"Reference, measured now: {suite.reference_name}, same protocol: {ref['pc_success']:.0f} % "
+                f"success, {ref['pc_closed']:.0f} % closed.",
+                "",
+            ]
     curves_md = curve_table(suite, variants, datasets, cells)
     if curves_md:
-        md += ["## Learning curves: success % (training minutes) at each evaluated checkpoint", "",
-               "Minutes of training on one CPU core up to the checkpoint (the run's mean step rate); plots: "
-               "`benchmarks/plot_learning_curves.py`.", "", curves_md, ""]
+        md += [
+            "## Learning curves: success % (training minutes) at each evaluated checkpoint",
+            "",
+            "Minutes of training on one CPU core up to the checkpoint (the run's mean step rate); plots: "
+            "`benchmarks/plot_learning_curves.py`.",
+            "",
+            curves_md,
+            "",
+        ]
     tasks_md = per_task_table(suite, variants, datasets, cells)
     if tasks_md:
         md += ["## Success per evaluation task (%)", "", tasks_md]
-    md += ["## Wall time (s): train / eval", "",
-           "| agent | " + " | ".join(suite.dataset_columns[d] for d in datasets) + " |",
-           "|---|" + "---:|" * len(datasets)]
+    md += [
+        "## Wall time (s): train / eval",
+        "",
+        "| agent | " + " | ".join(suite.dataset_columns[d] for d in datasets) + " |",
+        "|---|" + "---:|" * len(datasets),
+    ]
     for v in variants:
-        md.append(f"| {VARIANTS[v][2]} | " + " | ".join(
-            f"{fmt_pct((cells.get((v, d)) or {}).get('train_s'))} / {fmt_pct((cells.get((v, d)) or {}).get('eval_s'))}"
-            for d in datasets) + " |")
+        md.append(
+            f"| {VARIANTS[v][2]} | "
+            + " | ".join(
+                f"{fmt_pct((cells.get((v, d)) or {}).get('train_s'))} / {fmt_pct((cells.get((v, d)) or {}).get('eval_s'))}"
+                for d in datasets
+            )
+            + " |"
+        )
     md += ["", "## Datasets", ""]
     for d, info in datasets_info.items():
-        gen = (f"generated by `{info['command']}`" + (f" in {info['generate_s']:.0f} s" if info.get("generate_s") else "")
-               if info["command"] else "provenance unknown")
+        gen = (
+            f"generated by `{info['command']}`"
+            + (f" in {info['generate_s']:.0f} s" if info.get("generate_s") else "")
+            if info["command"]
+            else "provenance unknown"
+        )
         md.append(f"- `{d}`: `{info['root']}` ({gen})")
     md += ["", "## Commands", "", "Every cell runs (paths under the work dir):", "", "```bash"]
     example = next((c for c in cells.values() if c.get("train_command")), None)
     if example:
         md += [example["train_command"], example["eval_command"]]
-    md += ["```", "", "The exact command of every cell is in the JSON file next to this report.", "",
-           "Full paper budget on a GPU (all nine agents, every dataset):", "", "```bash", gpu_command(suite), "```", ""]
+    md += [
+        "```",
+        "",
+        "The exact command of every cell is in the JSON file next to this report.",
+        "",
+        "Full paper budget on a GPU (all nine agents, every dataset):",
+        "",
+        "```bash",
+        gpu_command(suite),
+        "```",
+        "",
+    ]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(md))
     payload = {
-        "suite": suite.name, "argv": argv, "budget": asdict(budget), "wall_s": wall_s,
-        "config": f"train_configs/{config_name(suite, budget)}", "paper_source": suite.paper_source, "gpu_command": gpu_command(suite),
-        "datasets": datasets_info, "variants": variants,
+        "suite": suite.name,
+        "argv": argv,
+        "budget": asdict(budget),
+        "wall_s": wall_s,
+        "config": f"train_configs/{config_name(suite, budget)}",
+        "paper_source": suite.paper_source,
+        "gpu_command": gpu_command(suite),
+        "datasets": datasets_info,
+        "variants": variants,
         "cells": [cells[(v, d)] for v in variants for d in datasets if (v, d) in cells],
     }
     out.with_suffix(".json").write_text(json.dumps(payload, indent=2))
@@ -588,37 +798,78 @@ def write_report(out: Path, suite: Suite, variants: list[str], datasets: list[st
 
 # ------------------------------------------------------------------------------------------- main
 
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--suite", required=True, choices=sorted(SUITES))
     ap.add_argument("--datasets", nargs="+", default=["all"], help="dataset names or 'all'")
     ap.add_argument("--variants", nargs="+", default=["all"], help=f"{list(VARIANTS)} or 'all'")
     ap.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
-    ap.add_argument("--steps", type=int, default=None, help=f"training steps (default: {CPU_STEPS} on cpu, {FULL_STEPS} on cuda)")
-    ap.add_argument("--batch-size", type=int, default=None, help=f"default: {CPU_BATCH} on cpu, {FULL_BATCH} on cuda")
-    ap.add_argument("--eval-episodes", type=int, default=None, help="per cell; a multiple of the suite's task count")
+    ap.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help=f"training steps (default: {CPU_STEPS} on cpu, {FULL_STEPS} on cuda)",
+    )
+    ap.add_argument(
+        "--batch-size", type=int, default=None, help=f"default: {CPU_BATCH} on cpu, {FULL_BATCH} on cuda"
+    )
+    ap.add_argument(
+        "--eval-episodes", type=int, default=None, help="per cell; a multiple of the suite's task count"
+    )
     ap.add_argument("--eval-batch-size", type=int, default=10, help="parallel envs in lerobot-eval")
-    ap.add_argument("--eval-async", action="store_true", help="lerobot-eval's AsyncVectorEnv (default: sync envs)")
-    ap.add_argument("--ema-cutoff", type=float, default=None,
-                    help="default: the config's, or steps/10 when shorter (short budgets)")
+    ap.add_argument(
+        "--eval-async", action="store_true", help="lerobot-eval's AsyncVectorEnv (default: sync envs)"
+    )
+    ap.add_argument(
+        "--ema-cutoff",
+        type=float,
+        default=None,
+        help="default: the config's, or steps/10 when shorter (short budgets)",
+    )
     ap.add_argument("--jobs", type=int, default=1, help="cells trained/evaluated in parallel")
-    ap.add_argument("--config", default=None,
-                    help="train config under train_configs/ (default: the suite's paper-size config)")
+    ap.add_argument(
+        "--config",
+        default=None,
+        help="train config under train_configs/ (default: the suite's paper-size config)",
+    )
     ap.add_argument("--seed", type=int, default=1000, help="training seed (lerobot-train --seed)")
-    ap.add_argument("--curve-points", type=int, default=1,
-                    help="evaluate this many checkpoints, every steps/N (learning curve); 1 = the last only")
-    ap.add_argument("--cached-only", action="store_true",
-                    help="run nothing: report the finished cells of this budget (e.g. from several invocations)")
+    ap.add_argument(
+        "--curve-points",
+        type=int,
+        default=1,
+        help="evaluate this many checkpoints, every steps/N (learning curve); 1 = the last only",
+    )
+    ap.add_argument(
+        "--cached-only",
+        action="store_true",
+        help="run nothing: report the finished cells of this budget (e.g. from several invocations)",
+    )
     ap.add_argument("--out", type=Path, default=None, help="markdown report (JSON next to it)")
-    ap.add_argument("--import-report", type=Path, action="append", default=[],
-                    help="JSON of an earlier report with this budget: its cells count as finished (repeatable)")
+    ap.add_argument(
+        "--import-report",
+        type=Path,
+        action="append",
+        default=[],
+        help="JSON of an earlier report with this budget: its cells count as finished (repeatable)",
+    )
     ap.add_argument("--work-dir", type=Path, default=REPO_ROOT / "outputs" / "paper_experiments" / "runs")
     ap.add_argument("--data-root", type=Path, default=REPO_ROOT / "outputs" / "paper_experiments" / "data")
-    ap.add_argument("--ogbench-episodes", type=int, default=None, help="generated episodes (default: official)")
-    ap.add_argument("--ogbench-episode-steps", type=int, default=None, help="rows per episode (default: official)")
-    ap.add_argument("--planar-frames", type=int, default=None, help="recorded frames (default: the paper's sizes)")
-    ap.add_argument("--train-arg", action="append", default=[], help="extra lerobot-train argument (repeatable)")
-    ap.add_argument("--eval-arg", action="append", default=[], help="extra lerobot-eval argument (repeatable)")
+    ap.add_argument(
+        "--ogbench-episodes", type=int, default=None, help="generated episodes (default: official)"
+    )
+    ap.add_argument(
+        "--ogbench-episode-steps", type=int, default=None, help="rows per episode (default: official)"
+    )
+    ap.add_argument(
+        "--planar-frames", type=int, default=None, help="recorded frames (default: the paper's sizes)"
+    )
+    ap.add_argument(
+        "--train-arg", action="append", default=[], help="extra lerobot-train argument (repeatable)"
+    )
+    ap.add_argument(
+        "--eval-arg", action="append", default=[], help="extra lerobot-eval argument (repeatable)"
+    )
     return ap
 
 
@@ -628,23 +879,40 @@ def resolve_budget(args, suite: Suite) -> Budget:
     batch = args.batch_size or (FULL_BATCH if gpu else CPU_BATCH)
     episodes = args.eval_episodes or (suite.full_eval_episodes if gpu else suite.cpu_eval_episodes)
     if steps < 1 or batch < 1 or episodes < 1 or args.jobs < 1 or args.eval_batch_size < 1:
-        raise ValueError(f"--steps, --batch-size, --eval-episodes, --eval-batch-size and --jobs must be >= 1, got "
-                         f"{steps}, {batch}, {episodes}, {args.eval_batch_size}, {args.jobs}")
+        raise ValueError(
+            f"--steps, --batch-size, --eval-episodes, --eval-batch-size and --jobs must be >= 1, got "
+            f"{steps}, {batch}, {episodes}, {args.eval_batch_size}, {args.jobs}"
+        )
     if not 1 <= args.curve_points <= steps:
         raise ValueError(f"--curve-points must be in 1..--steps ({steps}), got {args.curve_points}")
     if args.config is not None and not (REPO_ROOT / "train_configs" / args.config).is_file():
         raise ValueError(f"--config {args.config!r}: no such file under train_configs/")
     if episodes % suite.num_tasks:
-        raise ValueError(f"--eval-episodes={episodes} must be a multiple of {suite.num_tasks} for suite {suite.name!r} "
-                         f"(every evaluation task equally often)")
+        raise ValueError(
+            f"--eval-episodes={episodes} must be a multiple of {suite.num_tasks} for suite {suite.name!r} "
+            f"(every evaluation task equally often)"
+        )
     ema = args.ema_cutoff
     if ema is None:
-        paper_ema = json.loads((REPO_ROOT / "train_configs" / (args.config or suite.config)).read_text())["policy"]["ema_cutoff"]
+        paper_ema = json.loads((REPO_ROOT / "train_configs" / (args.config or suite.config)).read_text())[
+            "policy"
+        ]["ema_cutoff"]
         ema = None if steps / 10 >= paper_ema else steps / 10
-    return Budget(device=args.device, steps=steps, batch_size=batch, eval_episodes=episodes,
-                  eval_batch_size=min(args.eval_batch_size, episodes), eval_async=args.eval_async, ema_cutoff=ema,
-                  num_workers=None if gpu else 0, train_args=list(args.train_arg), eval_args=list(args.eval_arg),
-                  config=args.config, seed=args.seed, curve_points=args.curve_points)
+    return Budget(
+        device=args.device,
+        steps=steps,
+        batch_size=batch,
+        eval_episodes=episodes,
+        eval_batch_size=min(args.eval_batch_size, episodes),
+        eval_async=args.eval_async,
+        ema_cutoff=ema,
+        num_workers=None if gpu else 0,
+        train_args=list(args.train_arg),
+        eval_args=list(args.eval_arg),
+        config=args.config,
+        seed=args.seed,
+        curve_points=args.curve_points,
+    )
 
 
 def budget_tag(budget: Budget) -> str:
@@ -667,7 +935,10 @@ def main(argv: list[str] | None = None) -> int:
     # --jobs trainings share the CPU: one OpenMP pool each of cpus/jobs threads (oversubscribed OpenMP pools
     # spin-wait on each other and can stall for minutes on a loaded machine)
     os.environ.setdefault("OMP_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // args.jobs)))
-    out = args.out or REPO_ROOT / "benchmarks" / "results" / f"paper_experiments_{suite.name}_{budget_tag(budget)}.md"
+    out = (
+        args.out
+        or REPO_ROOT / "benchmarks" / "results" / f"paper_experiments_{suite.name}_{budget_tag(budget)}.md"
+    )
     spec = DataSpec(args.ogbench_episodes, args.ogbench_episode_steps, args.planar_frames)
     start = time.perf_counter()
 
@@ -687,8 +958,12 @@ def main(argv: list[str] | None = None) -> int:
         else:
             root, cmd, wall = ensure_dataset(suite.name, d, args.data_root, spec)
         roots[d] = root
-        datasets_info[d] = {"root": shell([str(root)]), "repo_id": dataset_repo_id(suite.name, d), "command": cmd,
-                            "generate_s": wall or None}
+        datasets_info[d] = {
+            "root": shell([str(root)]),
+            "repo_id": dataset_repo_id(suite.name, d),
+            "command": cmd,
+            "generate_s": wall or None,
+        }
         if cmd is None and imported.get(d, {}).get("command"):  # generated elsewhere: keep that report's note
             datasets_info[d] = imported[d]
     jobs = [(v, d) for d in datasets for v in variants]
@@ -709,7 +984,9 @@ def main(argv: list[str] | None = None) -> int:
             if cell is not None:
                 cells[vd] = cell
 
-    write_report(out, suite, variants, datasets, cells, budget, argv, datasets_info, time.perf_counter() - start)
+    write_report(
+        out, suite, variants, datasets, cells, budget, argv, datasets_info, time.perf_counter() - start
+    )
     print(f"wrote {out} and {out.with_suffix('.json')}", flush=True)
     print(results_table(suite, variants, datasets, cells), flush=True)
     return 1 if any(c.get("error") for c in cells.values()) else 0

@@ -27,8 +27,10 @@ def load_cells(reports: list[Path]) -> list[dict]:
                 config = Path(cell.get("config") or payload.get("config", "")).stem
                 cells.append({**cell, "seed": cell.get("seed", budget.get("seed")), "config_name": config})
     if not cells:
-        raise ValueError(f"No cell with a learning curve in {[str(p) for p in reports]}; run the paper runner "
-                         "with --curve-points N (N > 1)")
+        raise ValueError(
+            f"No cell with a learning curve in {[str(p) for p in reports]}; run the paper runner "
+            "with --curve-points N (N > 1)"
+        )
     return cells
 
 
@@ -49,12 +51,16 @@ def plot(cells: list[dict], out: Path, title: str) -> None:
     colours = {a: plt.cm.tab10(i % 10) for i, a in enumerate(agents)}
     fig, axes = plt.subplots(2, len(datasets), figsize=(5.2 * len(datasets), 7.5), squeeze=False)
     for col, dataset in enumerate(datasets):
-        for cell in sorted((c for c in cells if c["dataset"] == dataset), key=lambda c: (c["agent"], c["seed"])):
+        for cell in sorted(
+            (c for c in cells if c["dataset"] == dataset), key=lambda c: (c["agent"], c["seed"])
+        ):
             name = label(cell, several_configs)
             style = "--" if several_configs and "cpu" not in cell["config_name"] else "-"
             colour = colours[name.split(" (")[0]]
             success = [p["pc_success"] for p in cell["curve"]]
-            axes[0, col].plot([p["step"] for p in cell["curve"]], success, style, marker="o", color=colour, label=name)
+            axes[0, col].plot(
+                [p["step"] for p in cell["curve"]], success, style, marker="o", color=colour, label=name
+            )
             minutes = [p["train_min"] for p in cell["curve"]]
             if all(m is not None for m in minutes):
                 axes[1, col].plot(minutes, success, style, marker="o", color=colour, label=name)

@@ -30,20 +30,43 @@ def num_subtasks(task: str) -> int:
     return int(a.door != b.door) + int(a.tray != b.tray) + int((a.pot_on, a.pot_xy) != (b.pot_on, b.pot_xy))
 
 
-def eval_command(checkpoint: str, task: str, episodes: int, image_size: int, steps_per_subtask: int, out: Path,
-                 extra: list[str]) -> list[str]:
-    return [str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--env.type=talos_kitchen", f"--env.task={task}",
-            f"--env.image_size={image_size}", f"--env.episode_length={steps_per_subtask * num_subtasks(task)}",
-            f"--eval.n_episodes={episodes}", "--eval.batch_size=1",
-            "--policy.device=cpu", f"--output_dir={out}", *extra]
+def eval_command(
+    checkpoint: str,
+    task: str,
+    episodes: int,
+    image_size: int,
+    steps_per_subtask: int,
+    out: Path,
+    extra: list[str],
+) -> list[str]:
+    return [
+        str(BIN / "lerobot-eval"),
+        f"--policy.path={checkpoint}",
+        "--env.type=talos_kitchen",
+        f"--env.task={task}",
+        f"--env.image_size={image_size}",
+        f"--env.episode_length={steps_per_subtask * num_subtasks(task)}",
+        f"--eval.n_episodes={episodes}",
+        "--eval.batch_size=1",
+        "--policy.device=cpu",
+        f"--output_dir={out}",
+        *extra,
+    ]
 
 
 def run_one(label: str, checkpoint: str, task: str, args, root: Path) -> dict:
     out = root / label / task
-    cmd = eval_command(checkpoint, task, args.episodes, args.image_size, args.steps_per_subtask, out, args.extra)
+    cmd = eval_command(
+        checkpoint, task, args.episodes, args.image_size, args.steps_per_subtask, out, args.extra
+    )
     t0 = time.perf_counter()
     if not (out / "eval_info.json").exists():  # resumable: a finished (label, task) is not re-run
-        env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
+        env = {
+            **os.environ,
+            "HF_HUB_OFFLINE": "1",
+            "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+            "OMP_NUM_THREADS": "1",
+        }
         proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if proc.returncode:
             raise RuntimeError(f"lerobot-eval failed for {label}/{task}:\n{proc.stderr[-3000:]}")
@@ -51,9 +74,15 @@ def run_one(label: str, checkpoint: str, task: str, args, root: Path) -> dict:
     info = json.loads((out / "eval_info.json").read_text())
     successes = [bool(x) for t in info.get("per_task", []) for x in t["metrics"]["successes"]]
     print(f"{label:>8} {task:<22} {info['overall']['pc_success']:5.1f}% ({seconds:.0f} s)", flush=True)
-    return {"label": label, "task": task, "pc_success": info["overall"]["pc_success"],
-            "n_episodes": info["overall"]["n_episodes"], "seconds": seconds,
-            "successes": successes, "command": " ".join([os.path.relpath(cmd[0]), *cmd[1:]])}  # no machine path
+    return {
+        "label": label,
+        "task": task,
+        "pc_success": info["overall"]["pc_success"],
+        "n_episodes": info["overall"]["n_episodes"],
+        "seconds": seconds,
+        "successes": successes,
+        "command": " ".join([os.path.relpath(cmd[0]), *cmd[1:]]),
+    }  # no machine path
 
 
 def table(results: list[dict], labels: list[str]) -> str:
@@ -83,18 +112,30 @@ def merged_table(json_files: list[Path]) -> str:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--merge", nargs="+", type=Path, help="print one table from these result JSON files and exit")
+    ap.add_argument(
+        "--merge", nargs="+", type=Path, help="print one table from these result JSON files and exit"
+    )
     ap.add_argument("--policy", action="append", help="LABEL=CHECKPOINT_DIR (repeatable)")
     ap.add_argument("--tasks", nargs="*", default=list(TASK_NAMES))
     ap.add_argument("--episodes", type=int, default=5, help="episodes per task")
-    ap.add_argument("--image-size", type=int, default=128,
-                    help="camera size of the env; a state-only policy does not look at it (smaller renders faster)")
-    ap.add_argument("--steps-per-subtask", type=int, default=500,
-                    help="episode limit per object to move (the scripted operator needs 210-420 control steps per sub-task)")
+    ap.add_argument(
+        "--image-size",
+        type=int,
+        default=128,
+        help="camera size of the env; a state-only policy does not look at it (smaller renders faster)",
+    )
+    ap.add_argument(
+        "--steps-per-subtask",
+        type=int,
+        default=500,
+        help="episode limit per object to move (the scripted operator needs 210-420 control steps per sub-task)",
+    )
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--workdir", type=Path, default=Path("outputs/talos_suite"))
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/talos_kitchen_suite"))
-    ap.add_argument("--extra", nargs="*", default=[], help="more lerobot-eval flags, e.g. --policy.n_action_steps=10")
+    ap.add_argument(
+        "--extra", nargs="*", default=[], help="more lerobot-eval flags, e.g. --policy.n_action_steps=10"
+    )
     args = ap.parse_args(argv)
     if args.merge:
         print(merged_table(args.merge))
@@ -110,16 +151,28 @@ def main(argv: list[str] | None = None) -> None:
     minutes = (time.perf_counter() - t0) / 60
     labels = list(policies)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps({"policies": policies, "episodes_per_task": args.episodes,
-                                                         "results": results, "minutes": minutes}, indent=1))
+    args.out.with_suffix(".json").write_text(
+        json.dumps(
+            {
+                "policies": policies,
+                "episodes_per_task": args.episodes,
+                "results": results,
+                "minutes": minutes,
+            },
+            indent=1,
+        )
+    )
     md = table(results, labels)
     args.out.with_suffix(".md").write_text(
         f"# Talos kitchen suite: success per task ({args.episodes} episodes per task, lerobot-eval)\n\n{md}\n\n"
         f"Episode limit: {args.steps_per_subtask} control steps (20 s) per object to move (door, tray, pot), "
         "e.g. 500 for open_door, 1500 for store_pot. "
         f"Wall time {minutes:.0f} min with {args.jobs} parallel lerobot-eval runs. Checkpoints: "
-        + ", ".join(f"`{k}` = `{v}`" for k, v in policies.items()) + ".\n\nCommand of one cell:\n\n```\n"
-        + results[0]["command"] + "\n```\n")
+        + ", ".join(f"`{k}` = `{v}`" for k, v in policies.items())
+        + ".\n\nCommand of one cell:\n\n```\n"
+        + results[0]["command"]
+        + "\n```\n"
+    )
     print(md)
 
 

@@ -5,7 +5,12 @@ Importing this package registers the policy types with LeRobot (and is what LeRo
 does through the ``lerobot_policy_efm`` distribution).
 """
 
-from . import envs, ogbench, robots, train_hook  # envs, ogbench, robots register their types (lazy simulators)
+from . import (  # noqa: F401 (envs, ogbench, robots register their types; lazy simulators)
+    envs,
+    ogbench,
+    robots,
+    train_hook,
+)
 from .configuration_efm import EFMACConfig, EFMASConfig, EFMConfig, EFMGCConfig, EFMPCConfig, EFMPSConfig
 from .hindsight import HindsightGoalDataset, HindsightSpec
 from .processor_efm import make_efm_pre_post_processors

@@ -19,7 +19,14 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-from .configuration_efm import GOAL_DISTANCE_KEY, GOAL_PREFIX, OBS_PREFIX, RL_GOAL_PREFIX, TRAJ_PREFIX, EFMConfig
+from .configuration_efm import (
+    GOAL_DISTANCE_KEY,
+    GOAL_PREFIX,
+    OBS_PREFIX,
+    RL_GOAL_PREFIX,
+    TRAJ_PREFIX,
+    EFMConfig,
+)
 from .flow import euler_integrate, flow_matching_loss, interpolate, sample_source
 from .networks import ConditionalUnet1d, EnsembleMLPFlow, ObservationEncoder
 
@@ -67,7 +74,12 @@ class TrajectoryFlow(nn.Module):
         self.length, self.channels, self.source = length, channels, config.trajectory_source
         if kind == "unet":
             self.net = ConditionalUnet1d(
-                channels, cond_dim, config.unet_down_dims, config.unet_time_embed_dim, config.unet_kernel_size, config.unet_n_groups
+                channels,
+                cond_dim,
+                config.unet_down_dims,
+                config.unet_time_embed_dim,
+                config.unet_kernel_size,
+                config.unet_n_groups,
             )
         else:
             self.net = _FlatMLPFlow(length * channels, cond_dim, config.mlp_hidden_dims)
@@ -167,7 +179,9 @@ class EFMAgent(nn.Module, abc.ABC):
         self.latent_dim = self.encoder.latent_dim
         self.action_dim = config.output_features["action"].shape[0]
         # The "stay" action of velocity commands, in normalised units (raw 0); absolute commands hold a_k.
-        self.register_buffer("rest_action", torch.zeros(self.action_dim) if rest_action is None else rest_action.float())
+        self.register_buffer(
+            "rest_action", torch.zeros(self.action_dim) if rest_action is None else rest_action.float()
+        )
         if config.uses_critic:
             self.critic = Critic(2 * self.latent_dim, config.num_critics, config.mlp_hidden_dims)
         self.build_components(self.latent_dim, self.action_dim)
@@ -191,7 +205,9 @@ class EFMAgent(nn.Module, abc.ABC):
 
     def critic_distance(self, obs: Tensor, goal: Tensor) -> Tensor:
         cfg = self.config
-        return self.critic.distance(torch.cat([obs, goal], -1), cfg.critic_inference_eps, cfg.num_inference_steps)
+        return self.critic.distance(
+            torch.cat([obs, goal], -1), cfg.critic_inference_eps, cfg.num_inference_steps
+        )
 
     # --- training ----------------------------------------------------------------------------------
     def num_bootstrap_rows(self, batch_size: int, step: int | None) -> int:
@@ -209,7 +225,9 @@ class EFMAgent(nn.Module, abc.ABC):
             return batch_size
         return min(batch_size, round(batch_size * (since + 1) / cfg.rl_ramp_steps))
 
-    def training_rows(self, batch: dict[str, Tensor], target: EFMAgent, step: int | None = None) -> TrainingRows:
+    def training_rows(
+        self, batch: dict[str, Tensor], target: EFMAgent, step: int | None = None
+    ) -> TrainingRows:
         cfg = self.config
         n_rl = self.num_bootstrap_rows(batch["action"].shape[0], step)
         use_rl = n_rl > 0
@@ -224,7 +242,11 @@ class EFMAgent(nn.Module, abc.ABC):
             # Planner / world targets are *stop-gradient* latents of the EMA encoder: regressing onto
             # latents that the same loss can move lets a learned encoder collapse them.
             with torch.no_grad():
-                traj_batch = {OBS_PREFIX + k[len(TRAJ_PREFIX) :]: v.flatten(0, 1) for k, v in batch.items() if k.startswith(TRAJ_PREFIX)}
+                traj_batch = {
+                    OBS_PREFIX + k[len(TRAJ_PREFIX) :]: v.flatten(0, 1)
+                    for k, v in batch.items()
+                    if k.startswith(TRAJ_PREFIX)
+                }
                 obs_traj = target.encoder(traj_batch).reshape(actions.shape[0], cfg.obs_traj_len, -1)
         rows = Rows(l_obs, l_goal, distance, actions, obs_traj)
 
@@ -244,8 +266,17 @@ class EFMAgent(nn.Module, abc.ABC):
 
         if use_rl:
             head = {k: v[:n_rl] for k, v in batch.items() if k.startswith((GOAL_PREFIX, RL_GOAL_PREFIX))}
-            rows = rows.cat(self.bootstrap_rows(head, target, l_obs[:n_rl], latents[2][:n_rl], distance[:n_rl],
-                                                actions[:n_rl], None if obs_traj is None else obs_traj[:n_rl]))
+            rows = rows.cat(
+                self.bootstrap_rows(
+                    head,
+                    target,
+                    l_obs[:n_rl],
+                    latents[2][:n_rl],
+                    distance[:n_rl],
+                    actions[:n_rl],
+                    None if obs_traj is None else obs_traj[:n_rl],
+                )
+            )
         return TrainingRows(rows, goal_free, n_rl)
 
     @torch.no_grad()
@@ -264,7 +295,9 @@ class EFMAgent(nn.Module, abc.ABC):
     def losses(self, rows: TrainingRows) -> dict[str, Tensor]:
         """One flow-matching loss per component, keyed by component name."""
 
-    def compute_loss(self, batch: dict[str, Tensor], target: EFMAgent, step: int | None = None) -> tuple[Tensor, dict[str, float]]:
+    def compute_loss(
+        self, batch: dict[str, Tensor], target: EFMAgent, step: int | None = None
+    ) -> tuple[Tensor, dict[str, float]]:
         """``step``: updates done so far (the RL warm-up and ramp read it; None = RL fully on)."""
         rows = self.training_rows(batch, target, step)
         losses = self.losses(rows)
@@ -330,7 +363,9 @@ class FMAC(EFMAgent):
 
     def act(self, l_obs, l_goal):
         d = self.critic_distance(l_obs, l_goal)
-        action = self.actor.sample(torch.cat([l_obs, l_goal, d[:, None]], -1), self.config.num_inference_steps)
+        action = self.actor.sample(
+            torch.cat([l_obs, l_goal, d[:, None]], -1), self.config.num_inference_steps
+        )
         return {"action": action, "distance": d}
 
 
@@ -382,8 +417,14 @@ class FMPS(EFMAgent):
         plans = plans.view(l_obs.shape[0], n, *plans.shape[1:])
         plan, index = self.select_candidates(plans, scores)
         action = self.actor.sample(torch.cat([l_obs, plan.flatten(1)], -1), steps)
-        return {"action": action, "distance": scores.amin(1), "obs_plan": plan, "candidate_obs_plans": plans,
-                "candidate_distances": scores, "chosen_candidate": index}
+        return {
+            "action": action,
+            "distance": scores.amin(1),
+            "obs_plan": plan,
+            "candidate_obs_plans": plans,
+            "candidate_distances": scores,
+            "chosen_candidate": index,
+        }
 
 
 class FMAS(EFMAgent):
@@ -413,8 +454,14 @@ class FMAS(EFMAgent):
         chunks = chunks.view(l_obs.shape[0], n, *chunks.shape[1:])
         action, index = self.select_candidates(chunks, scores)
         futures = futures.view(l_obs.shape[0], n, *futures.shape[1:])
-        return {"action": action, "distance": scores.amin(1), "obs_plan": futures[torch.arange(len(index)), index],
-                "candidate_actions": chunks, "candidate_distances": scores, "chosen_candidate": index}
+        return {
+            "action": action,
+            "distance": scores.amin(1),
+            "obs_plan": futures[torch.arange(len(index)), index],
+            "candidate_actions": chunks,
+            "candidate_distances": scores,
+            "chosen_candidate": index,
+        }
 
 
 AGENTS: dict[str, type[EFMAgent]] = {"gc": FMGC, "ac": FMAC, "pc": FMPC, "ps": FMPS, "as": FMAS}

@@ -8,7 +8,6 @@ authors' reference implementation (planar-push trajectory settings, its network 
 from __future__ import annotations
 
 import logging
-
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -202,11 +201,15 @@ class EFMConfig(PreTrainedConfig):
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
             "goal_advance_distance": self.goal_advance_distance >= 0.0,
             "goal_advance_key": self.goal_advance_key is None or bool(self.goal_advance_key.strip()),
-            "n_action_steps": 1 <= self.n_action_steps <= (self.action_traj_len - 1) * self.action_traj_stride + 1,
+            "n_action_steps": 1
+            <= self.n_action_steps
+            <= (self.action_traj_len - 1) * self.action_traj_stride + 1,
         }
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
-            raise ValueError(f"Invalid EFM config value(s): {', '.join(f'{n}={getattr(self, n)!r}' for n in bad)}.")
+            raise ValueError(
+                f"Invalid EFM config value(s): {', '.join(f'{n}={getattr(self, n)!r}' for n in bad)}."
+            )
         multiple = 2 ** len(self.unet_down_dims)
         if self.action_traj_len % multiple:
             raise ValueError(
@@ -216,7 +219,9 @@ class EFMConfig(PreTrainedConfig):
         if self.action_mode not in ("absolute", "velocity"):
             raise ValueError(f"action_mode must be 'absolute' or 'velocity', got {self.action_mode!r}.")
         if self.trajectory_source not in ("unit_ball", "gaussian"):
-            raise ValueError(f"trajectory_source must be 'unit_ball' or 'gaussian', got {self.trajectory_source!r}.")
+            raise ValueError(
+                f"trajectory_source must be 'unit_ball' or 'gaussian', got {self.trajectory_source!r}."
+            )
         if self.use_rl and not self.uses_critic:
             raise ValueError(f"use_rl needs a critic; {type(self).__name__} (FM-GC) has none.")
 
@@ -239,18 +244,26 @@ class EFMConfig(PreTrainedConfig):
     @property
     def mirror_prefixes(self) -> tuple[str, ...]:
         """Mirrored key families the hindsight wrapper produces for this agent."""
-        return (GOAL_PREFIX,) + ((RL_GOAL_PREFIX,) if self.use_rl else ()) + ((TRAJ_PREFIX,) if self.uses_obs_trajectory else ())
+        return (
+            (GOAL_PREFIX,)
+            + ((RL_GOAL_PREFIX,) if self.use_rl else ())
+            + ((TRAJ_PREFIX,) if self.uses_obs_trajectory else ())
+        )
 
     def add_mirror_features(self) -> None:
         """Declare the goal (and RL goal, trajectory) keys as inputs shaped like the observation they mirror,
         so LeRobot's normaliser handles them and checkpoints record them."""
-        mirrors = {mirror_key(k, p): ft for p in self.mirror_prefixes for k, ft in self.observation_features.items()}
+        mirrors = {
+            mirror_key(k, p): ft for p in self.mirror_prefixes for k, ft in self.observation_features.items()
+        }
         self.input_features = {**self.input_features, **mirrors}
 
     def validate_features(self) -> None:
         obs = self.observation_features
         if not obs:
-            raise ValueError("EFM policies need at least one observation.* input feature; the config has none.")
+            raise ValueError(
+                "EFM policies need at least one observation.* input feature; the config has none."
+            )
         for key, ft in obs.items():
             if ft.type is FeatureType.VISUAL and len(ft.shape) != 3:
                 raise ValueError(f"Image feature {key!r} must have shape (C, H, W), got {ft.shape}.")

@@ -34,7 +34,9 @@ def _run(cli: str, *args: str, log: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--output", type=Path, default=Path("outputs/demo"))
     parser.add_argument("--episodes", type=int, default=40, help="play episodes to record (200 frames each)")
     parser.add_argument("--steps", type=int, default=None, help="training steps (default: the config's)")
@@ -45,23 +47,41 @@ def main(argv: list[str] | None = None) -> None:
     args.output.mkdir(parents=True, exist_ok=True)
     if not (data / "meta" / "info.json").exists():
         shutil.rmtree(data, ignore_errors=True)
-        dataset = make_point_play_dataset(data, repo_id=REPO_ID, num_episodes=args.episodes, episode_length=200)
+        dataset = make_point_play_dataset(
+            data, repo_id=REPO_ID, num_episodes=args.episodes, episode_length=200
+        )
         print(f"recorded {dataset.num_episodes} play episodes ({dataset.num_frames} frames) in {data}")
     shutil.rmtree(run, ignore_errors=True)
     shutil.rmtree(evaluation, ignore_errors=True)
 
     start = time.time()
     steps = [f"--steps={args.steps}", f"--save_freq={args.steps}"] if args.steps else []
-    _run("lerobot-train", f"--config_path={CONFIG}", f"--dataset.root={data}", f"--output_dir={run}", *steps,
-         log=args.output / "train.log")
+    _run(
+        "lerobot-train",
+        f"--config_path={CONFIG}",
+        f"--dataset.root={data}",
+        f"--output_dir={run}",
+        *steps,
+        log=args.output / "train.log",
+    )
     print(f"trained in {time.time() - start:.0f} s -> {run / 'checkpoints' / 'last' / 'pretrained_model'}")
 
-    _run("lerobot-eval", f"--policy.path={run / 'checkpoints' / 'last' / 'pretrained_model'}", "--env.type=efm_point_reach",
-         "--env.task=random", f"--eval.n_episodes={args.eval_episodes}", f"--eval.batch_size={min(args.eval_episodes, 10)}",
-         "--policy.device=cpu", f"--output_dir={evaluation}", log=args.output / "eval.log")
+    _run(
+        "lerobot-eval",
+        f"--policy.path={run / 'checkpoints' / 'last' / 'pretrained_model'}",
+        "--env.type=efm_point_reach",
+        "--env.task=random",
+        f"--eval.n_episodes={args.eval_episodes}",
+        f"--eval.batch_size={min(args.eval_episodes, 10)}",
+        "--policy.device=cpu",
+        f"--output_dir={evaluation}",
+        log=args.output / "eval.log",
+    )
     overall = json.loads((evaluation / "eval_info.json").read_text())["overall"]
-    print(f"lerobot-eval on efm_point_reach (random start and goal): success {overall['pc_success']:.0f}% "
-          f"over {overall['n_episodes']} episodes; videos in {evaluation / 'videos'}")
+    print(
+        f"lerobot-eval on efm_point_reach (random start and goal): success {overall['pc_success']:.0f}% "
+        f"over {overall['n_episodes']} episodes; videos in {evaluation / 'videos'}"
+    )
 
 
 if __name__ == "__main__":

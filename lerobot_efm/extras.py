@@ -23,8 +23,10 @@ def require(module: str, extra: str, needed_by: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError as err:
-        raise ImportError(f"{needed_by} needs the Python package '{module}', which comes with the [{extra}] extra: "
-                          f"{install_hint(extra)}") from err
+        raise ImportError(
+            f"{needed_by} needs the Python package '{module}', which comes with the [{extra}] extra: "
+            f"{install_hint(extra)}"
+        ) from err
 
 
 def require_distribution(name: str, extra: str, needed_by: str) -> importlib.metadata.Distribution:
@@ -32,5 +34,7 @@ def require_distribution(name: str, extra: str, needed_by: str) -> importlib.met
     try:
         return importlib.metadata.distribution(name)
     except importlib.metadata.PackageNotFoundError as err:
-        raise ImportError(f"{needed_by} needs the '{name}' distribution, which comes with the [{extra}] extra: "
-                          f"{install_hint(extra)}") from err
+        raise ImportError(
+            f"{needed_by} needs the '{name}' distribution, which comes with the [{extra}] extra: "
+            f"{install_hint(extra)}"
+        ) from err

@@ -33,7 +33,9 @@ def sample_unit_ball(shape: tuple[int, ...], event_dims: int, *, device=None, ge
     return (direction * radius).reshape(shape)
 
 
-def sample_source(kind: str, shape: tuple[int, ...], event_dims: int, *, device=None, generator=None) -> Tensor:
+def sample_source(
+    kind: str, shape: tuple[int, ...], event_dims: int, *, device=None, generator=None
+) -> Tensor:
     """Source distribution for trajectory flows: ``"unit_ball"`` (reference) or ``"gaussian"``."""
     if kind == "unit_ball":
         return sample_unit_ball(shape, event_dims, device=device, generator=generator)

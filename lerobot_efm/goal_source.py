@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-
 from lerobot.utils.keyboard_input import create_key_listener
 
 from .configuration_efm import GOAL_PREFIX, OBS_PREFIX, is_mirror_key
@@ -28,12 +27,20 @@ log = logging.getLogger(__name__)
 # and which one is current. Deployment CLIs rebuild the pre-processor from the checkpoint's JSON, so the saved
 # step cannot receive the CLI's --policy.goal_* values; the policy, built from the CLI-overridden config, sets
 # the goals here instead, and advances them when its critic says the current one is reached.
-_deploy = {"goals": [], "index": 0, "image_shapes": {}, "warned": set(), "key": None, "key_pressed": False,
-           "listener": None}
+_deploy = {
+    "goals": [],
+    "index": 0,
+    "image_shapes": {},
+    "warned": set(),
+    "key": None,
+    "key_pressed": False,
+    "listener": None,
+}
 
 
-def set_deploy_goal(goal: dict[str, torch.Tensor] | list[dict[str, torch.Tensor]] | None,
-                    advance_key: str | None = None) -> None:
+def set_deploy_goal(
+    goal: dict[str, torch.Tensor] | list[dict[str, torch.Tensor]] | None, advance_key: str | None = None
+) -> None:
     """Replace the goal (or the sequence of goals) inserted into goal-less observations (None removes it).
     ``advance_key``: a key whose press moves a sequence on to its next goal (LeRobot's keyboard listener)."""
     goals = [] if not goal else [goal] if isinstance(goal, dict) else list(goal)
@@ -75,8 +82,12 @@ def fit_live_images(observation: dict) -> dict:
         if not isinstance(value, torch.Tensor) or tuple(value.shape[-2:]) == tuple(shape[-2:]):
             continue
         if key not in _deploy["warned"]:
-            log.warning("camera %s sends %s frames, the checkpoint was trained on %s: resized with OpenCV", key,
-                        tuple(value.shape[-3:]), tuple(shape))
+            log.warning(
+                "camera %s sends %s frames, the checkpoint was trained on %s: resized with OpenCV",
+                key,
+                tuple(value.shape[-3:]),
+                tuple(shape),
+            )
             _deploy["warned"].add(key)
         frames = value.reshape(-1, *value.shape[-3:]).cpu()
         resized = torch.stack([_resize(f, shape) for f in frames])
@@ -100,8 +111,14 @@ def advance_deploy_goal(distance_steps: float, threshold: float) -> bool:
     if _deploy["index"] + 1 >= len(_deploy["goals"]) or distance_steps >= threshold:
         return False
     _deploy["index"] += 1
-    log.info("goal %d reached (critic distance %.1f steps < %.1f): now goal %d of %d", _deploy["index"] - 1,
-             distance_steps, threshold, _deploy["index"], len(_deploy["goals"]))
+    log.info(
+        "goal %d reached (critic distance %.1f steps < %.1f): now goal %d of %d",
+        _deploy["index"] - 1,
+        distance_steps,
+        threshold,
+        _deploy["index"],
+        len(_deploy["goals"]),
+    )
     return True
 
 
@@ -119,8 +136,10 @@ def read_goal_file(path: str | Path) -> dict[str, torch.Tensor]:
     goal = load_file(str(path))
     bad = [k for k in goal if not k.startswith(OBS_PREFIX) or is_mirror_key(k)]
     if bad:
-        raise ValueError(f"goal file {path}: keys {bad} are not plain observation keys (observation.state, "
-                         f"observation.images.<camera>)")
+        raise ValueError(
+            f"goal file {path}: keys {bad} are not plain observation keys (observation.state, "
+            f"observation.images.<camera>)"
+        )
     return goal
 
 
@@ -130,11 +149,15 @@ def write_goal_file(goal: dict[str, torch.Tensor], path: str | Path) -> Path:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    save_file({k: v.detach().cpu().contiguous() for k, v in goal.items() if k.startswith(OBS_PREFIX)}, str(path))
+    save_file(
+        {k: v.detach().cpu().contiguous() for k, v in goal.items() if k.startswith(OBS_PREFIX)}, str(path)
+    )
     return path
 
 
-def read_dataset_frame(root: str | Path, episode: int, frame: int, repo_id: str | None = None) -> dict[str, torch.Tensor]:
+def read_dataset_frame(
+    root: str | Path, episode: int, frame: int, repo_id: str | None = None
+) -> dict[str, torch.Tensor]:
     """The ``observation.*`` keys of frame ``frame`` (negative: from the end) of episode ``episode`` of the
     LeRobot dataset at ``root``; video frames are decoded, only that one."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
@@ -151,8 +174,11 @@ def read_dataset_frame(root: str | Path, episode: int, frame: int, repo_id: str 
     if not -n <= frame < n:
         raise ValueError(f"goal frame {frame} out of range: episode {episode} of {root} has {n} frames")
     item = ds[frame % n]
-    return {k: v for k, v in item.items() if isinstance(v, torch.Tensor) and k.startswith(OBS_PREFIX)
-            and not is_mirror_key(k)}
+    return {
+        k: v
+        for k, v in item.items()
+        if isinstance(v, torch.Tensor) and k.startswith(OBS_PREFIX) and not is_mirror_key(k)
+    }
 
 
 def _resize(img: torch.Tensor, shape: tuple[int, ...]) -> torch.Tensor:
@@ -176,25 +202,35 @@ def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> 
         raise ValueError("this policy has no goal features (observation.goal.*) to fill")
     goal = {}
     for key, shape in wanted.items():
-        src = OBS_PREFIX + key[len(GOAL_PREFIX):]
+        src = OBS_PREFIX + key[len(GOAL_PREFIX) :]
         if src not in observation:
-            raise KeyError(f"the goal lacks {src!r} (for {key!r}, shape {shape}); it has {sorted(observation)}")
+            raise KeyError(
+                f"the goal lacks {src!r} (for {key!r}, shape {shape}); it has {sorted(observation)}"
+            )
         value = torch.as_tensor(observation[src])
         if ".images." in key:
             if value.dim() == 3 and value.shape[-1] in (1, 3) and value.shape[0] not in (1, 3):  # HWC
                 value = value.permute(2, 0, 1)
             value = value.float() / 255.0 if value.dtype == torch.uint8 else value.float()
             if value.dim() != 3 or value.shape[0] != shape[0]:
-                raise ValueError(f"goal image {src!r} has shape {tuple(value.shape)}; the checkpoint expects "
-                                 f"{shape} (channels, height, width)")
+                raise ValueError(
+                    f"goal image {src!r} has shape {tuple(value.shape)}; the checkpoint expects "
+                    f"{shape} (channels, height, width)"
+                )
             if tuple(value.shape) != shape:
-                log.warning("goal image %s is %s, the checkpoint expects %s: resized with OpenCV", src,
-                            tuple(value.shape), shape)
+                log.warning(
+                    "goal image %s is %s, the checkpoint expects %s: resized with OpenCV",
+                    src,
+                    tuple(value.shape),
+                    shape,
+                )
                 value = _resize(value, shape)
         else:
             value = value.float().reshape(-1) if value.dim() <= 1 else value.float()
             if tuple(value.shape) != shape:
-                raise ValueError(f"goal {src!r} has shape {tuple(value.shape)}; the checkpoint expects {shape}")
+                raise ValueError(
+                    f"goal {src!r} has shape {tuple(value.shape)}; the checkpoint expects {shape}"
+                )
         goal[key] = value
     return goal
 
@@ -210,13 +246,20 @@ def load_goals(config) -> list[dict[str, torch.Tensor]] | None:
         observations = [read_goal_file(p) for p in sources]
     elif getattr(config, "goal_dataset_root", None):
         sources = [f"{config.goal_dataset_root} episode {config.goal_episode} frame {config.goal_frame}"]
-        observations = [read_dataset_frame(config.goal_dataset_root, config.goal_episode, config.goal_frame,
-                                           config.goal_repo_id)]
+        observations = [
+            read_dataset_frame(
+                config.goal_dataset_root, config.goal_episode, config.goal_frame, config.goal_repo_id
+            )
+        ]
     else:
         return None
     goals = [to_goal_keys(o, config.input_features) for o in observations]
     for source, goal in zip(sources, goals, strict=True):
         states = {k: [round(float(x), 4) for x in v.reshape(-1)] for k, v in goal.items() if v.dim() == 1}
-        log.info("deploy goal from %s: %s%s", source, states, " + images " + str(sorted(set(goal) - set(states)))
-                 if len(states) < len(goal) else "")
+        log.info(
+            "deploy goal from %s: %s%s",
+            source,
+            states,
+            " + images " + str(sorted(set(goal) - set(states))) if len(states) < len(goal) else "",
+        )
     return goals

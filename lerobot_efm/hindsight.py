@@ -23,7 +23,16 @@ import numpy as np
 import pyarrow as pa
 import torch
 
-from .configuration_efm import GOAL_DISTANCE_KEY, GOAL_PREFIX, OBS_PREFIX, RL_GOAL_PREFIX, TRAJ_PREFIX, EFMConfig, is_mirror_key, mirror_key
+from .configuration_efm import (
+    GOAL_DISTANCE_KEY,
+    GOAL_PREFIX,
+    OBS_PREFIX,
+    RL_GOAL_PREFIX,
+    TRAJ_PREFIX,
+    EFMConfig,
+    is_mirror_key,
+    mirror_key,
+)
 from .processor_efm import mirror_stats
 
 
@@ -45,8 +54,15 @@ class HindsightSpec:
     def from_config(cls, config: EFMConfig) -> HindsightSpec:
         keys = tuple(config.observation_features) or None
         return cls(
-            config.obs_traj_len, config.obs_traj_stride, config.action_traj_len, config.action_traj_stride,
-            config.max_goal_distance, config.action_mode, config.use_rl and config.uses_critic, config.uses_obs_trajectory, keys,
+            config.obs_traj_len,
+            config.obs_traj_stride,
+            config.action_traj_len,
+            config.action_traj_stride,
+            config.max_goal_distance,
+            config.action_mode,
+            config.use_rl and config.uses_critic,
+            config.uses_obs_trajectory,
+            keys,
         )
 
     @property
@@ -66,9 +82,13 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
         keys = list(self.spec.observation_keys or available)
         missing = [k for k in keys if k not in features]
         if missing:
-            raise KeyError(f"Dataset {meta.repo_id!r} lacks the observation key(s) {missing} the policy needs; it has {available}.")
+            raise KeyError(
+                f"Dataset {meta.repo_id!r} lacks the observation key(s) {missing} the policy needs; it has {available}."
+            )
         if "action" not in features:
-            raise KeyError(f"Dataset {meta.repo_id!r} has no 'action' feature; EFM policies learn action trajectories.")
+            raise KeyError(
+                f"Dataset {meta.repo_id!r} has no 'action' feature; EFM policies learn action trajectories."
+            )
         if not keys:
             raise KeyError(f"Dataset {meta.repo_id!r} has no observation.* feature to condition on.")
         self.video_keys = [k for k in keys if features[k]["dtype"] == "video"]
@@ -77,17 +97,25 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
 
         table = base.hf_dataset.data
         self.episode_index = _column(table, "episode_index").astype(np.int64).reshape(-1)
-        self.frame_index = _column(table, "index").astype(np.int64).reshape(-1)  # absolute, as LeRobot's items
+        self.frame_index = (
+            _column(table, "index").astype(np.int64).reshape(-1)
+        )  # absolute, as LeRobot's items
         self.timestamps = _column(table, "timestamp").astype(np.float64).reshape(-1)
         self.task_index = _column(table, "task_index").astype(np.int64).reshape(-1)
-        self.vectors = {k: torch.from_numpy(_column(table, k).astype(np.float32)) for k in [*self.vector_keys, "action"]}
+        self.vectors = {
+            k: torch.from_numpy(_column(table, k).astype(np.float32)) for k in [*self.vector_keys, "action"]
+        }
 
         # Episode boundaries from runs of episode_index (rows of one episode are contiguous).
         n = len(self.episode_index)
         starts = np.flatnonzero(np.r_[True, self.episode_index[1:] != self.episode_index[:-1]])
         ends = np.r_[starts[1:], n]
         lengths = ends - starts
-        short = [(int(self.episode_index[s]), int(length)) for s, length in zip(starts, lengths, strict=True) if length <= self.spec.window]
+        short = [
+            (int(self.episode_index[s]), int(length))
+            for s, length in zip(starts, lengths, strict=True)
+            if length <= self.spec.window
+        ]
         if short:
             raise ValueError(
                 f"Episode(s) (episode_index, frames) {short[:10]} of {meta.repo_id!r} are not longer than the trajectory window "
@@ -127,7 +155,11 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
             rows[TRAJ_PREFIX] = [k + min(j * spec.obs_traj_stride, d) for j in range(spec.obs_traj_len)]
         item = self._observations(rows)
         if spec.use_rl:
-            item.update(self._observations({RL_GOAL_PREFIX: [int(torch.randint(0, len(self.episode_index), ()).item())]}))
+            item.update(
+                self._observations(
+                    {RL_GOAL_PREFIX: [int(torch.randint(0, len(self.episode_index), ()).item())]}
+                )
+            )
 
         offsets = torch.arange(spec.action_traj_len) * spec.action_traj_stride
         actions = self.vectors["action"][k + offsets.clamp(max=d)]
@@ -151,10 +183,14 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
         for key in [*self.image_keys, *self.video_keys]:
             decoded = self._decode(key, flat) if key in self.video_keys else self._base.hf_dataset[flat][key]
             frames = dict(zip(flat, decoded, strict=True))
-            transform = self._base.image_transforms  # LeRobot's --dataset.image_transforms, on every frame used
+            transform = (
+                self._base.image_transforms
+            )  # LeRobot's --dataset.image_transforms, on every frame used
             for prefix, r in rows.items():
                 stack = torch.stack([frames[i] for i in r])
-                out[_name(key, prefix)] = _squeeze_single(stack if transform is None else transform(stack), prefix)
+                out[_name(key, prefix)] = _squeeze_single(
+                    stack if transform is None else transform(stack), prefix
+                )
         return out
 
     def _decode(self, key: str, rows: list[int]) -> torch.Tensor:
@@ -166,7 +202,9 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
         shift = meta.episodes[ep][f"videos/{key}/from_timestamp"]
         path = self._base.root / meta.get_video_file_path(ep, key)
         stamps = [shift + float(self.timestamps[r]) for r in rows]
-        frames = decode_video_frames(path, stamps, self._base.tolerance_s, getattr(self._base, "_video_backend", None))
+        frames = decode_video_frames(
+            path, stamps, self._base.tolerance_s, getattr(self._base, "_video_backend", None)
+        )
         return frames.reshape(len(rows), *frames.shape[-3:])
 
 
@@ -198,9 +236,15 @@ def _squeeze_single(x: torch.Tensor, prefix: str) -> torch.Tensor:
 def _column(table: pa.Table, key: str) -> np.ndarray:
     """A (possibly list-valued) arrow column as a (rows, ...) numpy array, without Python loops."""
     if key not in table.column_names:
-        raise KeyError(f"Column {key!r} missing from the dataset's parquet data (columns: {table.column_names}).")
+        raise KeyError(
+            f"Column {key!r} missing from the dataset's parquet data (columns: {table.column_names})."
+        )
     array = table.column(key).combine_chunks()
-    if pa.types.is_list(array.type) or pa.types.is_fixed_size_list(array.type) or pa.types.is_large_list(array.type):
+    if (
+        pa.types.is_list(array.type)
+        or pa.types.is_fixed_size_list(array.type)
+        or pa.types.is_large_list(array.type)
+    ):
         values = array.flatten().to_numpy(zero_copy_only=False)
         return values.reshape(len(array), -1)
     return array.to_numpy(zero_copy_only=False)

@@ -13,14 +13,10 @@ from collections import deque
 
 import torch
 from huggingface_hub import ModelCard, ModelCardData
+from lerobot.policies.pretrained import PreTrainedPolicy
 from torch import Tensor
 
-from lerobot.policies.pretrained import PreTrainedPolicy
-
 from .agents import EFMAgent, make_agent
-from .goal_source import (
-    advance_deploy_goal, advance_deploy_goal_on_key, has_goal_source, load_goals, set_deploy_goal, set_image_shapes,
-)
 from .configuration_efm import (
     GOAL_DISTANCE_KEY,
     GOAL_PREFIX,
@@ -32,6 +28,14 @@ from .configuration_efm import (
     EFMPCConfig,
     EFMPSConfig,
     mirror_key,
+)
+from .goal_source import (
+    advance_deploy_goal,
+    advance_deploy_goal_on_key,
+    has_goal_source,
+    load_goals,
+    set_deploy_goal,
+    set_image_shapes,
 )
 
 PAPER = "Rouxel et al., *Extremum Flow Matching for Offline Goal Conditioned Reinforcement Learning*, arXiv:2505.19717 (2025)"
@@ -56,10 +60,14 @@ class EFMPolicy(PreTrainedPolicy):
         # deployment: the goal named by --policy.goal_* (none: clear any earlier policy's) for the pre-processor
         goals = load_goals(config) if has_goal_source(config) else None
         if goals and len(goals) > 1 and not config.uses_critic and not config.goal_advance_key:
-            raise ValueError(f"a sequence of {len(goals)} goals advances on the critic's distance; "
-                             f"{config.type} has no critic: set --policy.goal_advance_key to advance on a key press")
+            raise ValueError(
+                f"a sequence of {len(goals)} goals advances on the critic's distance; "
+                f"{config.type} has no critic: set --policy.goal_advance_key to advance on a key press"
+            )
         set_deploy_goal(goals, config.goal_advance_key)
-        set_image_shapes({k: tuple(ft.shape) for k, ft in config.observation_features.items() if ".images." in k})
+        set_image_shapes(
+            {k: tuple(ft.shape) for k, ft in config.observation_features.items() if ".images." in k}
+        )
         self.reset()
 
     # --- LeRobot API -------------------------------------------------------------------------------
@@ -107,7 +115,9 @@ class EFMPolicy(PreTrainedPolicy):
             steps = _to_control_rate(chunk, self.config.action_traj_stride, self.config.action_mode)
             n = self.config.n_action_steps
             distance = self.last_prediction.get("distance")
-            if distance is not None and advance_deploy_goal(float(distance.max()), self.config.goal_advance_distance):
+            if distance is not None and advance_deploy_goal(
+                float(distance.max()), self.config.goal_advance_distance
+            ):
                 n = 1
             self._action_queue.extend(steps[:, :n].transpose(0, 1))
         return self._action_queue.popleft()
@@ -144,7 +154,9 @@ class EFMPolicy(PreTrainedPolicy):
         action = _require(batch, "action", "training batch")
         expected = (cfg.action_traj_len, cfg.output_features["action"].shape[0])
         if action.dim() != 3 or tuple(action.shape[1:]) != expected:
-            raise ValueError(f"Batch key 'action' has shape {tuple(action.shape)}; expected (B, {expected[0]}, {expected[1]}) (L_a, action dim).")
+            raise ValueError(
+                f"Batch key 'action' has shape {tuple(action.shape)}; expected (B, {expected[0]}, {expected[1]}) (L_a, action dim)."
+            )
         self._check_observation_shapes(batch, OBS_PREFIX)
         self._check_observation_shapes(batch, GOAL_PREFIX)
         _check_finite(batch)
@@ -174,18 +186,25 @@ class EFMPolicy(PreTrainedPolicy):
                 )
 
     # --- Hub ---------------------------------------------------------------------------------------
-    def generate_model_card(self, dataset_repo_id, model_type, license, tags, cfg=None, dataset_meta=None) -> ModelCard:
+    def generate_model_card(
+        self, dataset_repo_id, model_type, license, tags, cfg=None, dataset_meta=None
+    ) -> ModelCard:
         """LeRobot's card plus what an EFM user needs: the agent, the paper and the dataset."""
         card_data = ModelCardData(
             license=license or "apache-2.0",
             library_name="lerobot",
             pipeline_tag="robotics",
-            tags=sorted(set(tags or []) | {"robotics", "lerobot", model_type, "extremum-flow-matching", "goal-conditioned"}),
+            tags=sorted(
+                set(tags or [])
+                | {"robotics", "lerobot", model_type, "extremum-flow-matching", "goal-conditioned"}
+            ),
             model_name=model_type,
             datasets=dataset_repo_id,
         )
         cfg_ = self.config
-        agent = AGENT_NAMES[cfg_.agent] + ("-use-RL" if cfg_.use_rl else ("-no-RL" if cfg_.uses_critic else ""))
+        agent = AGENT_NAMES[cfg_.agent] + (
+            "-use-RL" if cfg_.use_rl else ("-no-RL" if cfg_.uses_critic else "")
+        )
         steps = f"{cfg.steps} steps, batch {cfg.batch_size}" if cfg is not None else "unknown budget"
         text = f"""---
 {card_data.to_yaml()}
@@ -273,7 +292,9 @@ def _check_finite(batch: dict[str, Tensor]) -> None:
     for key, value in batch.items():
         if isinstance(value, Tensor) and value.is_floating_point() and not torch.isfinite(value).all():
             bad = (~torch.isfinite(value)).sum().item()
-            raise ValueError(f"Batch key {key!r} contains {bad} NaN/inf value(s); EFM policies need finite inputs.")
+            raise ValueError(
+                f"Batch key {key!r} contains {bad} NaN/inf value(s); EFM policies need finite inputs."
+            )
 
 
 def _to_control_rate(chunk: Tensor, stride: int, action_mode: str) -> Tensor:

@@ -25,7 +25,9 @@ class SinusoidalTimeEmbedding(nn.Module):
     ``t`` may be a 0-d tensor (same time for the whole batch, as during Euler integration) or (B,).
     """
 
-    def __init__(self, dim: int = 32, hidden_dim: int = 128, min_period: float = 0.002, max_period: float = 10.0):
+    def __init__(
+        self, dim: int = 32, hidden_dim: int = 128, min_period: float = 0.002, max_period: float = 10.0
+    ):
         super().__init__()
         if dim % 2:
             raise ValueError(f"time embedding dim must be even, got {dim}")
@@ -51,14 +53,21 @@ class TemporalConv1d(nn.Conv1d):
     SMALL = 64  # batch x length below which the GEMM path is used
 
     def forward(self, x: Tensor) -> Tensor:
-        if torch.is_grad_enabled() or x.shape[0] * x.shape[-1] > self.SMALL or self.groups != 1 or self.dilation[0] != 1:
+        if (
+            torch.is_grad_enabled()
+            or x.shape[0] * x.shape[-1] > self.SMALL
+            or self.groups != 1
+            or self.dilation[0] != 1
+        ):
             return super().forward(x)
         (k,), (stride,), (pad,) = self.kernel_size, self.stride, self.padding
         length = (x.shape[-1] + 2 * pad - k) // stride + 1
         xp = F.pad(x, (pad, pad)).transpose(1, 2)  # (B, L + 2p, C)
         # (B, L', C, k) flattened channel-major, matching a *view* of the (out, C, k) weight: no weight copy.
         windows = torch.stack([xp[:, j : j + stride * (length - 1) + 1 : stride] for j in range(k)], dim=-1)
-        return F.linear(windows.flatten(2), self.weight.view(self.out_channels, -1), self.bias).transpose(1, 2)
+        return F.linear(windows.flatten(2), self.weight.view(self.out_channels, -1), self.bias).transpose(
+            1, 2
+        )
 
 
 class FiLMResidualBlock1d(nn.Module):
@@ -67,11 +76,19 @@ class FiLMResidualBlock1d(nn.Module):
     The FiLM projection is split into a condition part (cached per integration) and a time part.
     """
 
-    def __init__(self, in_ch: int, out_ch: int, cond_dim: int, time_dim: int, kernel_size: int, n_groups: int):
+    def __init__(
+        self, in_ch: int, out_ch: int, cond_dim: int, time_dim: int, kernel_size: int, n_groups: int
+    ):
         super().__init__()
         pad = kernel_size // 2
-        self.conv1 = nn.Sequential(TemporalConv1d(in_ch, out_ch, kernel_size, padding=pad), nn.GroupNorm(n_groups, out_ch), nn.SiLU())
-        self.conv2 = nn.Sequential(TemporalConv1d(out_ch, out_ch, kernel_size, padding=pad), nn.GroupNorm(n_groups, out_ch), nn.SiLU())
+        self.conv1 = nn.Sequential(
+            TemporalConv1d(in_ch, out_ch, kernel_size, padding=pad), nn.GroupNorm(n_groups, out_ch), nn.SiLU()
+        )
+        self.conv2 = nn.Sequential(
+            TemporalConv1d(out_ch, out_ch, kernel_size, padding=pad),
+            nn.GroupNorm(n_groups, out_ch),
+            nn.SiLU(),
+        )
         self.film_cond = nn.Linear(cond_dim, 2 * out_ch)
         self.film_time = nn.Linear(time_dim, 2 * out_ch, bias=False)
         self.skip = TemporalConv1d(in_ch, out_ch, 1) if in_ch != out_ch else nn.Identity()
@@ -109,7 +126,11 @@ class ConditionalUnet1d(nn.Module):
         self.down = nn.ModuleList()
         in_ch = channels
         for ch in down_dims:
-            self.down.append(nn.ModuleList([block(in_ch, ch), block(ch, ch), TemporalConv1d(ch, ch, 3, stride=2, padding=1)]))
+            self.down.append(
+                nn.ModuleList(
+                    [block(in_ch, ch), block(ch, ch), TemporalConv1d(ch, ch, 3, stride=2, padding=1)]
+                )
+            )
             in_ch = ch
         self.middle = nn.ModuleList([block(in_ch, in_ch), block(in_ch, in_ch)])
         self.up = nn.ModuleList()
@@ -126,7 +147,9 @@ class ConditionalUnet1d(nn.Module):
 
     def velocity(self, x: Tensor, t: Tensor, cache: list[Tensor]) -> Tensor:
         if x.shape[1] % self.length_multiple:
-            raise ValueError(f"UNet trajectory length {x.shape[1]} is not divisible by {self.length_multiple}.")
+            raise ValueError(
+                f"UNet trajectory length {x.shape[1]} is not divisible by {self.length_multiple}."
+            )
         time_emb = self.time_embedding(t)
         films = iter(cache)
         h = x.transpose(1, 2)
@@ -171,10 +194,16 @@ class EnsembleMLPFlow(nn.Module):
         self.biases = nn.ParameterList()
         for fan_in, fan_out in zip(dims[:-1], dims[1:], strict=True):
             bound = 1.0 / math.sqrt(fan_in)
-            self.weights.append(nn.Parameter(torch.empty(num_members, fan_in, fan_out).uniform_(-bound, bound)))
+            self.weights.append(
+                nn.Parameter(torch.empty(num_members, fan_in, fan_out).uniform_(-bound, bound))
+            )
             self.biases.append(nn.Parameter(torch.empty(num_members, 1, fan_out).uniform_(-bound, bound)))
-        self.norm_weights = nn.ParameterList([nn.Parameter(torch.ones(num_members, 1, h)) for h in hidden_dims])
-        self.norm_biases = nn.ParameterList([nn.Parameter(torch.zeros(num_members, 1, h)) for h in hidden_dims])
+        self.norm_weights = nn.ParameterList(
+            [nn.Parameter(torch.ones(num_members, 1, h)) for h in hidden_dims]
+        )
+        self.norm_biases = nn.ParameterList(
+            [nn.Parameter(torch.zeros(num_members, 1, h)) for h in hidden_dims]
+        )
 
     def condition(self, cond: Tensor) -> Tensor:
         """(B, cond_dim) -> (E, B, H1): the conditioning part of the first layer."""
@@ -230,13 +259,24 @@ class ImpalaEncoder(nn.Module):
         layers: list[nn.Module] = []
         in_ch = image_shape[0]
         for ch in channels:
-            layers += [nn.Conv2d(in_ch, ch, 3, padding=1), nn.MaxPool2d(3, stride=2, padding=1), ImpalaResidualBlock(ch), nn.Dropout(dropout)]
+            layers += [
+                nn.Conv2d(in_ch, ch, 3, padding=1),
+                nn.MaxPool2d(3, stride=2, padding=1),
+                ImpalaResidualBlock(ch),
+                nn.Dropout(dropout),
+            ]
             in_ch = ch
         self.stacks = nn.Sequential(*layers)
         with torch.no_grad():
             flat = self.stacks(torch.zeros(1, *image_shape)).numel()
         self.head = nn.Sequential(
-            nn.Flatten(), nn.SiLU(), nn.LayerNorm(flat), nn.Linear(flat, hidden_dim), nn.SiLU(), nn.LayerNorm(hidden_dim), nn.Linear(hidden_dim, out_dim)
+            nn.Flatten(),
+            nn.SiLU(),
+            nn.LayerNorm(flat),
+            nn.Linear(flat, hidden_dim),
+            nn.SiLU(),
+            nn.LayerNorm(hidden_dim),
+            nn.Linear(hidden_dim, out_dim),
         )
 
     def forward(self, images: Tensor) -> Tensor:
@@ -269,7 +309,9 @@ class ObservationEncoder(nn.Module):
         self.image_keys, self.vector_keys = sorted(image_shapes), sorted(vector_dims)
         self.images = nn.ModuleDict(
             {
-                _module_name(k): ImpalaEncoder(image_shapes[k], image_latent_dim, image_channels, image_hidden_dim, image_dropout)
+                _module_name(k): ImpalaEncoder(
+                    image_shapes[k], image_latent_dim, image_channels, image_hidden_dim, image_dropout
+                )
                 for k in self.image_keys
             }
         )
@@ -279,7 +321,9 @@ class ObservationEncoder(nn.Module):
         elif state_encoder == "mlp":
             self.vectors = nn.ModuleDict(
                 {
-                    _module_name(k): nn.Sequential(nn.Linear(vector_dims[k], state_latent_dim), nn.SiLU(), nn.LayerNorm(state_latent_dim))
+                    _module_name(k): nn.Sequential(
+                        nn.Linear(vector_dims[k], state_latent_dim), nn.SiLU(), nn.LayerNorm(state_latent_dim)
+                    )
                     for k in self.vector_keys
                 }
             )

@@ -10,9 +10,13 @@ from typing import Any
 
 import numpy as np
 import torch
-
 from lerobot.configs import PipelineFeatureType, PolicyFeature
-from lerobot.processor import ObservationProcessorStep, PolicyAction, PolicyProcessorPipeline, ProcessorStepRegistry
+from lerobot.processor import (
+    ObservationProcessorStep,
+    PolicyAction,
+    PolicyProcessorPipeline,
+    ProcessorStepRegistry,
+)
 from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
 
 from .configuration_efm import GOAL_PREFIX, MIRROR_PREFIXES, EFMConfig, is_mirror_key, mirror_key
@@ -47,7 +51,11 @@ class AddBatchDimensionToGoalsStep(ObservationProcessorStep):
                 value = goal[key]
                 observation[key] = value if batch is None else value.unsqueeze(0).expand(batch, *value.shape)
         for key, value in observation.items():
-            if isinstance(value, torch.Tensor) and key.startswith(GOAL_PREFIX) and value.dim() == _unbatched_rank(key):
+            if (
+                isinstance(value, torch.Tensor)
+                and key.startswith(GOAL_PREFIX)
+                and value.dim() == _unbatched_rank(key)
+            ):
                 observation[key] = value.unsqueeze(0)
         return observation
 
@@ -85,9 +93,13 @@ def widen_constant_features(stats: dict[str, dict[str, Any]] | None) -> dict[str
                 entry["min"] = _like(entry["min"], np.where(flat, centre - 1.0, lo))
                 entry["max"] = _like(entry["max"], np.where(flat, centre + 1.0, hi))
             if flat.any() and (key == "action" or key.startswith("observation.")) and not is_mirror_key(key):
-                logging.warning("%s: dimension(s) %s never change in the dataset (range 0); normalised as value "
-                                "minus %s instead of divided by 1e-8", key, np.flatnonzero(flat).tolist(),
-                                np.round(centre[flat], 4).tolist())
+                logging.warning(
+                    "%s: dimension(s) %s never change in the dataset (range 0); normalised as value "
+                    "minus %s instead of divided by 1e-8",
+                    key,
+                    np.flatnonzero(flat).tolist(),
+                    np.round(centre[flat], 4).tolist(),
+                )
         if "std" in entry:
             std = np.asarray(entry["std"], dtype=np.float64)
             if (std < CONSTANT_RANGE).any():
@@ -129,7 +141,13 @@ def make_efm_pre_post_processors(
     config.add_mirror_features()
     s = make_default_policy_processor_steps(config, mirror_stats(widen_constant_features(dataset_stats)))
     return make_policy_processor_pipelines(
-        input_steps=[s.rename_observations, s.add_batch_dim, AddBatchDimensionToGoalsStep(), s.to_device, s.normalize],
+        input_steps=[
+            s.rename_observations,
+            s.add_batch_dim,
+            AddBatchDimensionToGoalsStep(),
+            s.to_device,
+            s.normalize,
+        ],
         output_steps=[s.unnormalize, s.to_cpu],
     )
 

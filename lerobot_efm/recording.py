@@ -31,7 +31,6 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.utils import SuppressProgressBars
 
@@ -79,14 +78,20 @@ def flatten_observation(obs: dict, features_map: dict[str, str]) -> dict[str, np
             continue
         name = features_map.get(key)
         if name is None:
-            raise KeyError(f"Observation key {key!r} of the env has no entry in the env config's features_map "
-                           f"({sorted(features_map)}); cannot name it in the dataset")
+            raise KeyError(
+                f"Observation key {key!r} of the env has no entry in the env config's features_map "
+                f"({sorted(features_map)}); cannot name it in the dataset"
+            )
         out[name] = np.asarray(value, dtype=np.float32)
     return out
 
 
-def dataset_features(frame: dict[str, np.ndarray], action_dim: int, names: dict[str, list[str]] | None = None,
-                     use_videos: bool = True) -> dict:
+def dataset_features(
+    frame: dict[str, np.ndarray],
+    action_dim: int,
+    names: dict[str, list[str]] | None = None,
+    use_videos: bool = True,
+) -> dict:
     """LeRobot feature spec from one flattened observation (images as video by default)."""
     names = names or {}
     feats: dict[str, dict] = {}
@@ -94,13 +99,22 @@ def dataset_features(frame: dict[str, np.ndarray], action_dim: int, names: dict[
         if key.startswith("observation.images."):
             if value.ndim != 3 or value.shape[-1] != 3 or value.dtype != np.uint8:
                 raise ValueError(f"Camera {key!r} must be (H, W, 3) uint8, got {value.shape} {value.dtype}")
-            feats[key] = {"dtype": "video" if use_videos else "image", "shape": tuple(value.shape),
-                          "names": ["height", "width", "channels"]}
+            feats[key] = {
+                "dtype": "video" if use_videos else "image",
+                "shape": tuple(value.shape),
+                "names": ["height", "width", "channels"],
+            }
         else:
-            feats[key] = {"dtype": "float32", "shape": tuple(value.shape),
-                          "names": names.get(key) or [f"{key.rsplit('.', 1)[-1]}_{i}" for i in range(value.size)]}
-    feats["action"] = {"dtype": "float32", "shape": (action_dim,),
-                       "names": names.get("action") or [f"action_{i}" for i in range(action_dim)]}
+            feats[key] = {
+                "dtype": "float32",
+                "shape": tuple(value.shape),
+                "names": names.get(key) or [f"{key.rsplit('.', 1)[-1]}_{i}" for i in range(value.size)],
+            }
+    feats["action"] = {
+        "dtype": "float32",
+        "shape": (action_dim,),
+        "names": names.get("action") or [f"action_{i}" for i in range(action_dim)],
+    }
     return feats
 
 
@@ -157,9 +171,19 @@ class _InterruptGuard:
             raise _Interrupt(f"signal {self.pending}")
 
 
-def record_episodes(dataset: LeRobotDataset, env: gym.Env, operator, features_map: dict[str, str], *,
-                    episodes: int, episode_length: int, task: str, seed: int = 0, max_failures: int = 3,
-                    on_episode=None) -> RecordStats:
+def record_episodes(
+    dataset: LeRobotDataset,
+    env: gym.Env,
+    operator,
+    features_map: dict[str, str],
+    *,
+    episodes: int,
+    episode_length: int,
+    task: str,
+    seed: int = 0,
+    max_failures: int = 3,
+    on_episode=None,
+) -> RecordStats:
     """Record ``episodes`` episodes of at most ``episode_length`` frames into ``dataset``.
 
     Each frame is (observation before the action, action). A failing episode is dropped (logged) and
@@ -177,7 +201,9 @@ def record_episodes(dataset: LeRobotDataset, env: gym.Env, operator, features_ma
                     action = np.asarray(operator.act(obs), dtype=np.float32)
                     if not np.all(np.isfinite(action)):
                         raise ValueError(f"operator returned a non-finite action {action} at frame {n}")
-                    dataset.add_frame({**flatten_observation(obs, features_map), "action": action, "task": task})
+                    dataset.add_frame(
+                        {**flatten_observation(obs, features_map), "action": action, "task": task}
+                    )
                     obs, *_ = env.step(action)
                     n += 1
                 with guard.saving(), SuppressProgressBars():
@@ -188,8 +214,12 @@ def record_episodes(dataset: LeRobotDataset, env: gym.Env, operator, features_ma
             except _Interrupt:
                 stats.interrupted = True
                 drop_unsaved_frames(dataset)
-                logging.warning("Recording interrupted during episode %d (%s); %d saved episodes are kept.", ep,
-                                "saved first" if saved else "its frames are dropped", stats.saved)
+                logging.warning(
+                    "Recording interrupted during episode %d (%s); %d saved episodes are kept.",
+                    ep,
+                    "saved first" if saved else "its frames are dropped",
+                    stats.saved,
+                )
                 break
             except Exception as err:  # one bad episode must not lose the others
                 logging.exception("Episode %d failed and is dropped", ep)
@@ -225,8 +255,9 @@ def finalizing(dataset: LeRobotDataset):
         dataset.finalize()
 
 
-def open_dataset(root: Path, repo_id: str, fps: int, features: dict, resume: bool, robot_type: str | None,
-                 use_videos: bool) -> LeRobotDataset:
+def open_dataset(
+    root: Path, repo_id: str, fps: int, features: dict, resume: bool, robot_type: str | None, use_videos: bool
+) -> LeRobotDataset:
     """A new dataset at ``root`` or, with ``resume``, the existing one there (features must match)."""
     if resume:
         if not (root / "meta" / "info.json").exists():
@@ -237,9 +268,20 @@ def open_dataset(root: Path, repo_id: str, fps: int, features: dict, resume: boo
         if have != want:
             raise ValueError(f"Dataset at {root} has features {have}, the env produces {want}: cannot resume")
         if ds.meta.fps != fps:
-            raise ValueError(f"Dataset at {root} was recorded at {ds.meta.fps} fps, the env runs at {fps} fps")
+            raise ValueError(
+                f"Dataset at {root} was recorded at {ds.meta.fps} fps, the env runs at {fps} fps"
+            )
         return ds
     if root.exists():
-        raise FileExistsError(f"Dataset root {root} already exists; pass --resume=true to append or pick a new root")
-    return LeRobotDataset.create(repo_id, fps=fps, features=features, root=root, robot_type=robot_type,
-                                 use_videos=use_videos, metadata_buffer_size=1)
+        raise FileExistsError(
+            f"Dataset root {root} already exists; pass --resume=true to append or pick a new root"
+        )
+    return LeRobotDataset.create(
+        repo_id,
+        fps=fps,
+        features=features,
+        root=root,
+        robot_type=robot_type,
+        use_videos=use_videos,
+        metadata_buffer_size=1,
+    )

@@ -13,13 +13,18 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.utils import SuppressProgressBars
-from lerobot_efm.recording import finalizing
+
 from lerobot_efm.envs.point_reach import (
-    WALL_TOP, in_wall, move_point, render_scene, sample_free, segment_hits_wall,
+    WALL_TOP,
+    in_wall,
+    move_point,
+    render_scene,
+    sample_free,
+    segment_hits_wall,
 )
+from lerobot_efm.recording import finalizing
 
 FPS = 20
 TASK = "play"
@@ -33,7 +38,9 @@ def play_features(with_images: bool = False, image_size: int = 64) -> dict:
     }
     if with_images:
         feats["observation.images.top"] = {
-            "dtype": "video", "shape": (image_size, image_size, 3), "names": ["height", "width", "channels"]
+            "dtype": "video",
+            "shape": (image_size, image_size, 3),
+            "names": ["height", "width", "channels"],
         }
     return feats
 
@@ -168,8 +175,16 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--image-size", type=int, default=64)
     ap.add_argument("--no-wall", action="store_true")
     args = ap.parse_args(argv)
-    ds = make_point_play_dataset(args.root, args.repo_id, args.episodes, args.episode_length, args.seed,
-                                 args.images, args.image_size, wall=not args.no_wall)
+    ds = make_point_play_dataset(
+        args.root,
+        args.repo_id,
+        args.episodes,
+        args.episode_length,
+        args.seed,
+        args.images,
+        args.image_size,
+        wall=not args.no_wall,
+    )
     print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames")
 
 

@@ -36,7 +36,9 @@ def wrap_datasets(cfg, datasets):
             "(streaming and multi-dataset training are not supported)."
         )
     spec = HindsightSpec.from_config(policy_cfg)
-    return HindsightGoalDataset(train, spec), None if evaluation is None else HindsightGoalDataset(evaluation, spec)
+    return HindsightGoalDataset(train, spec), None if evaluation is None else HindsightGoalDataset(
+        evaluation, spec
+    )
 
 
 def _script_modules() -> list:
@@ -55,7 +57,9 @@ def install() -> bool:
         if original is None:
             logging.error(
                 "lerobot_efm: %s.%s not found: this lerobot version is not supported by the hindsight-goal hook; "
-                "efm_* policies cannot train under lerobot-train.", module.__name__, HOOKED_NAME
+                "efm_* policies cannot train under lerobot-train.",
+                module.__name__,
+                HOOKED_NAME,
             )
             continue
         if getattr(original, "_efm_hindsight", False):

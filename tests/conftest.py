@@ -7,10 +7,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import pytest  # noqa: E402
 import torch  # noqa: E402
-
-import lerobot_efm  # noqa: E402,F401  (registers the efm_* types)
 from lerobot.configs.policies import PreTrainedConfig  # noqa: E402
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
+
+import lerobot_efm  # noqa: E402,F401  (registers the efm_* types)
 from lerobot_efm.synthetic import make_point_play_dataset  # noqa: E402
 
 EFM_TYPES = ["efm_gc", "efm_ac", "efm_pc", "efm_ps", "efm_as"]
@@ -48,7 +48,9 @@ def state_dataset_root(tmp_path_factory):
 @pytest.fixture(scope="session")
 def video_dataset_root(tmp_path_factory):
     root = tmp_path_factory.mktemp("data") / "video"
-    make_point_play_dataset(root, repo_id=REPO_ID, num_episodes=2, episode_length=50, seed=1, with_images=True, image_size=32)
+    make_point_play_dataset(
+        root, repo_id=REPO_ID, num_episodes=2, episode_length=50, seed=1, with_images=True, image_size=32
+    )
     return root
 
 

@@ -11,12 +11,12 @@ import math
 from pathlib import Path
 
 import torch
-from torch.utils.data import DataLoader
-
 from lerobot.configs.train import TrainPipelineConfig
 from lerobot.datasets.factory import make_train_eval_datasets
 from lerobot.optim.factory import make_optimizer_and_scheduler
 from lerobot.policies.factory import make_policy, make_pre_post_processors
+from torch.utils.data import DataLoader
+
 from lerobot_efm.hindsight import HindsightGoalDataset
 from lerobot_efm.train_hook import wrap_datasets
 
@@ -27,7 +27,7 @@ def train_one_step(config_file: Path, *cli_args: str):
     cfg.validate()
     expected = json.loads(Path(config_file).read_text())["policy"]
     assert cfg.policy.type == expected["type"]
-    overridden = {a.split("=", 1)[0][len("--policy."):] for a in cli_args if a.startswith("--policy.")}
+    overridden = {a.split("=", 1)[0][len("--policy.") :] for a in cli_args if a.startswith("--policy.")}
     for field, value in expected.items():
         if field in ("type", "input_features", "output_features") or field in overridden:
             continue

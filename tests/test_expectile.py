@@ -64,7 +64,7 @@ def test_loss_minimiser_over_constants_is_the_expectile(tau):
         opt = torch.optim.LBFGS([m], lr=1, max_iter=200, tolerance_grad=1e-14, line_search_fn="strong_wolfe")
         xt = torch.as_tensor(x)
 
-        def closure():
+        def closure(opt=opt, xt=xt, m=m):
             opt.zero_grad()
             loss = evx.expectile_loss(xt - m, tau).mean()
             loss.backward()
@@ -97,7 +97,9 @@ def test_distributions_true_bounds_contain_and_touch_their_samples():
 def test_short_benchmark_run_returns_finite_errors_and_a_table(tmp_path):
     """A few training steps on tiny networks: every error is finite, and the report, table and plot are written."""
     torch.set_num_threads(1)
-    bench = evx.run_benchmark(steps=5, seeds=2, grid_size=11, hidden_dims=(16, 16), batch_size=32, euler_steps=3)
+    bench = evx.run_benchmark(
+        steps=5, seeds=2, grid_size=11, hidden_dims=(16, 16), batch_size=32, euler_steps=3
+    )
     assert set(bench["results"]) == set(evx.DISTRIBUTIONS) and bench["grid"].shape == (11,)
     for e in bench["results"].values():
         for key in ("mae", "gap"):
@@ -109,7 +111,11 @@ def test_short_benchmark_run_returns_finite_errors_and_a_table(tmp_path):
         assert np.isfinite(e["pop_expectile"]).all() and e["pop_expectile"].shape == (2, 11)
     lines = evx.format_table(bench).splitlines()
     assert len(lines) == 2 + len(evx.DISTRIBUTIONS)
-    assert all(line.count("|") == 6 for line in lines) and "flow min MAE" in lines[0] and "expectile(0.99)" in lines[0]
+    assert (
+        all(line.count("|") == 6 for line in lines)
+        and "flow min MAE" in lines[0]
+        and "expectile(0.99)" in lines[0]
+    )
     assert [line.split("|")[1].strip() for line in lines[2:]] == list(evx.DISTRIBUTIONS)
     assert all(line.count("±") == 4 for line in lines[2:])
 

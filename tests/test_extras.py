@@ -18,8 +18,12 @@ def test_a_missing_simulator_names_its_extra(monkeypatch):
     from lerobot_efm.envs.planar_push.env import PlanarPushEnv
     from lerobot_efm.ogbench.env import OGBenchEnv
 
-    monkeypatch.setitem(sys.modules, "mujoco", None)  # as if not installed: `import mujoco` raises ImportError
-    with pytest.raises(ImportError, match=r"planar_push environment needs .*'mujoco'.*lerobot_policy_efm\[planar\]"):
+    monkeypatch.setitem(
+        sys.modules, "mujoco", None
+    )  # as if not installed: `import mujoco` raises ImportError
+    with pytest.raises(
+        ImportError, match=r"planar_push environment needs .*'mujoco'.*lerobot_policy_efm\[planar\]"
+    ):
         PlanarPushEnv(task="pair0")
     monkeypatch.setitem(sys.modules, "ogbench", None)
     with pytest.raises(ImportError, match=r"lerobot_policy_efm\[ogbench\]"):
@@ -36,10 +40,17 @@ def _imported_top_level_modules() -> set[str]:
                 names.update(alias.name.split(".")[0] for alias in node.names)
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 names.add(node.module.split(".")[0])
-            elif (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "require"
-                  and isinstance(node.args[0], ast.Constant)):  # extras.require("mujoco", ...)
+            elif (
+                isinstance(node, ast.Call)
+                and getattr(node.func, "id", None) == "require"
+                and isinstance(node.args[0], ast.Constant)
+            ):  # extras.require("mujoco", ...)
                 names.add(node.args[0].value.split(".")[0])
-    return {n for n in names if n not in sys.stdlib_module_names and n not in ("lerobot_efm", "lerobot_policy_efm")}
+    return {
+        n
+        for n in names
+        if n not in sys.stdlib_module_names and n not in ("lerobot_efm", "lerobot_policy_efm")
+    }
 
 
 def _requirement_name(spec: str) -> str:
@@ -56,6 +67,10 @@ def test_the_package_declares_what_it_imports_and_nothing_else():
     needed = set()
     for module in _imported_top_level_modules():
         dists = {d.lower().replace("_", "-") for d in owners.get(module, [])} or {f"{module}-sdk"}  # rerun
-        assert dists & declared, f"'import {module}' comes from {sorted(dists)}, declared in no dependency list"
+        assert dists & declared, (
+            f"'import {module}' comes from {sorted(dists)}, declared in no dependency list"
+        )
         needed |= dists & declared
-    assert declared - needed == {"example-robot-data"}, declared - needed  # meshes: data files, never imported
+    assert declared - needed == {"example-robot-data"}, (
+        declared - needed
+    )  # meshes: data files, never imported

@@ -39,7 +39,7 @@ def test_unit_ball_generator_is_reproducible():
 
 
 def test_sample_source_kinds():
-    """"gaussian" is a standard normal (unbounded), "unit_ball" is bounded, unknown kinds are named."""
+    """ "gaussian" is a standard normal (unbounded), "unit_ball" is bounded, unknown kinds are named."""
     g = sample_source("gaussian", (4_000, 8, 2), 2)
     assert g.shape == (4_000, 8, 2) and abs(g.std().item() - 1) < 0.03 and g.flatten(1).norm(dim=-1).min() > 1
     assert sample_source("unit_ball", (100, 8, 2), 2).flatten(1).norm(dim=-1).max() <= 1 + 1e-6
@@ -80,7 +80,9 @@ def test_euler_converges_to_the_exponential():
 def test_euler_passes_uniform_scalar_times_and_rejects_zero_steps():
     """t is k/N as a 0-d tensor of x's dtype for k = 0..N-1; num_steps < 1 raises."""
     seen = []
-    euler_integrate(lambda x, t: seen.append(t) or torch.zeros_like(x), torch.zeros(3, dtype=torch.float64), 4)
+    euler_integrate(
+        lambda x, t: seen.append(t) or torch.zeros_like(x), torch.zeros(3, dtype=torch.float64), 4
+    )
     assert [t.dim() for t in seen] == [0] * 4 and {t.dtype for t in seen} == {torch.float64}
     assert [t.item() for t in seen] == [0.0, 0.25, 0.5, 0.75]
     with pytest.raises(ValueError, match="num_inference_steps"):

@@ -6,11 +6,11 @@ import logging
 import pytest
 import torch
 from conftest import REPO_ID, tiny_config
-from safetensors.torch import save_file
-
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.policies.factory import get_policy_class, make_policy, make_pre_post_processors
+from safetensors.torch import save_file
+
 from lerobot_efm.goal_source import deploy_goal, deploy_goal_index, set_deploy_goal, to_goal_keys
 from lerobot_efm.hindsight import HindsightGoalDataset
 from lerobot_efm.scripts.goal import main as goal_cli
@@ -39,41 +39,62 @@ def deploy(path, *flags):
     """What lerobot-rollout does with --policy.path=PATH plus --policy.<flags>."""
     cfg = PreTrainedConfig.from_pretrained(path, cli_overrides=list(flags))
     policy = get_policy_class(cfg.type).from_pretrained(path, config=cfg).eval()
-    pre, post = make_pre_post_processors(cfg, pretrained_path=str(path),
-                                         preprocessor_overrides={"device_processor": {"device": "cpu"}})
+    pre, post = make_pre_post_processors(
+        cfg, pretrained_path=str(path), preprocessor_overrides={"device_processor": {"device": "cpu"}}
+    )
     return policy, pre, post
 
 
-def test_goal_file_from_a_dataset_frame_reaches_goal_less_observations(state_dataset, state_dataset_root, tmp_path):
+def test_goal_file_from_a_dataset_frame_reaches_goal_less_observations(
+    state_dataset, state_dataset_root, tmp_path
+):
     path = checkpoint(state_dataset, tmp_path)
-    goal_file = goal_cli([f"--dataset.root={state_dataset_root}", f"--dataset.repo_id={REPO_ID}",
-                          "--dataset.episode=1", "--dataset.frame=-1", f"--output={tmp_path / 'goal.safetensors'}"])
+    goal_file = goal_cli(
+        [
+            f"--dataset.root={state_dataset_root}",
+            f"--dataset.repo_id={REPO_ID}",
+            "--dataset.episode=1",
+            "--dataset.frame=-1",
+            f"--output={tmp_path / 'goal.safetensors'}",
+        ]
+    )
     episode = LeRobotDataset(REPO_ID, root=state_dataset_root, episodes=[1])
     expected = episode[len(episode) - 1]["observation.state"]
 
     policy, pre, post = deploy(path, f"--goal_path={goal_file}")
     assert torch.equal(deploy_goal()["observation.goal.state"], expected)
-    robot = {"observation.state": torch.tensor([[0.1, -0.2]])}  # batched, as prepare_observation_for_inference
+    robot = {
+        "observation.state": torch.tensor([[0.1, -0.2]])
+    }  # batched, as prepare_observation_for_inference
     processed = pre(dict(robot))
     reference = pre({**robot, "observation.goal.state": expected[None]})
     assert torch.allclose(processed["observation.goal.state"], reference["observation.goal.state"])
     assert post(policy.select_action(processed)).shape == (1, 2)
     # a goal the observation brings (an env's) wins over the deploy-time one
     own = torch.tensor([[0.5, 0.5]])
-    assert not torch.allclose(pre({**robot, "observation.goal.state": own})["observation.goal.state"],
-                              processed["observation.goal.state"])
+    assert not torch.allclose(
+        pre({**robot, "observation.goal.state": own})["observation.goal.state"],
+        processed["observation.goal.state"],
+    )
 
 
 def test_goal_image_from_a_video_dataset_frame(video_dataset, video_dataset_root, tmp_path):
     path = checkpoint(video_dataset, tmp_path)
-    policy, pre, _ = deploy(path, f"--goal_dataset_root={video_dataset_root}", f"--goal_repo_id={REPO_ID}",
-                            "--goal_episode=0", "--goal_frame=10")
+    policy, pre, _ = deploy(
+        path,
+        f"--goal_dataset_root={video_dataset_root}",
+        f"--goal_repo_id={REPO_ID}",
+        "--goal_episode=0",
+        "--goal_frame=10",
+    )
     frame = LeRobotDataset(REPO_ID, root=video_dataset_root, episodes=[0])[10]
     robot = {"observation.state": torch.zeros(2, 2), "observation.images.top": torch.rand(2, 3, 32, 32)}
     processed = pre(robot)
     assert processed["observation.goal.images.top"].shape == (2, 3, 32, 32)
     assert torch.allclose(processed["observation.goal.images.top"][1], frame["observation.images.top"])
-    assert torch.equal(processed["observation.goal.images.top"][0], processed["observation.goal.images.top"][1])
+    assert torch.equal(
+        processed["observation.goal.images.top"][0], processed["observation.goal.images.top"][1]
+    )
     assert policy.select_action(processed).shape == (2, 2)
 
 
@@ -89,7 +110,9 @@ def test_bad_goals_are_refused_naming_the_key_and_shapes(state_dataset, state_da
     path = checkpoint(state_dataset, tmp_path)
     wrong = tmp_path / "wrong.safetensors"
     save_file({"observation.state": torch.zeros(3)}, str(wrong))
-    with pytest.raises(ValueError, match=r"'observation.state' has shape \(3,\); the checkpoint expects \(2,\)"):
+    with pytest.raises(
+        ValueError, match=r"'observation.state' has shape \(3,\); the checkpoint expects \(2,\)"
+    ):
         deploy(path, f"--goal_path={wrong}")
     other = tmp_path / "other.safetensors"
     save_file({"observation.velocity": torch.zeros(2)}, str(other))
@@ -98,7 +121,9 @@ def test_bad_goals_are_refused_naming_the_key_and_shapes(state_dataset, state_da
     with pytest.raises(FileNotFoundError, match="missing.safetensors"):
         deploy(path, f"--goal_path={tmp_path / 'missing.safetensors'}")
     with pytest.raises(ValueError, match="goal episode 7 out of range.*3 episodes"):
-        deploy(path, f"--goal_dataset_root={state_dataset_root}", f"--goal_repo_id={REPO_ID}", "--goal_episode=7")
+        deploy(
+            path, f"--goal_dataset_root={state_dataset_root}", f"--goal_repo_id={REPO_ID}", "--goal_episode=7"
+        )
 
 
 def test_goal_image_of_another_resolution_is_resized_with_a_warning(caplog):
@@ -116,8 +141,16 @@ def test_goal_image_of_another_resolution_is_resized_with_a_warning(caplog):
 
 def test_goal_cli_shows_the_goal_in_rerun(video_dataset_root, tmp_path):
     rrd = tmp_path / "goal.rrd"
-    goal_cli([f"--dataset.root={video_dataset_root}", f"--dataset.repo_id={REPO_ID}", "--dataset.frame=5",
-              f"--output={tmp_path / 'goal.safetensors'}", "--display=true", f"--rrd={rrd}"])
+    goal_cli(
+        [
+            f"--dataset.root={video_dataset_root}",
+            f"--dataset.repo_id={REPO_ID}",
+            "--dataset.frame=5",
+            f"--output={tmp_path / 'goal.safetensors'}",
+            "--display=true",
+            f"--rrd={rrd}",
+        ]
+    )
     assert rrd.is_file() and rrd.stat().st_size > 32 * 32 * 3  # the goal image is in it
 
 
@@ -131,7 +164,9 @@ def test_a_sequence_of_goals_advances_when_the_critic_says_reached(state_dataset
     save_file({"observation.state": torch.tensor([0.2, 0.2])}, str(first))
     save_file({"observation.state": torch.tensor([-0.3, 0.1])}, str(second))
     policy, pre, _ = deploy(path, f"--goal_path={first},{second}", "--goal_advance_distance=5")
-    policy.config.goal_advance_distance = -1e6  # an untrained critic's distance may be anything: never reached
+    policy.config.goal_advance_distance = (
+        -1e6
+    )  # an untrained critic's distance may be anything: never reached
     robot = {"observation.state": torch.tensor([[0.0, 0.0]])}
     goal_a = pre(dict(robot))["observation.goal.state"]
     for _ in range(3 * policy.config.n_action_steps):  # stays on goal a
@@ -200,14 +235,21 @@ def test_a_key_press_moves_a_goal_sequence_on_even_without_critic(state_dataset,
     set_deploy_goal(None)
     assert listeners[0].stopped  # a new deployment (or none) stops the old listener
 
+
 def test_live_camera_frames_of_another_resolution_are_resized_once_warned(video_dataset, tmp_path, caplog):
     path = checkpoint(video_dataset, tmp_path)
     policy, pre, _ = deploy(path)
     goal = torch.rand(1, 3, 32, 32)
     with caplog.at_level(logging.WARNING):
         for _ in range(2):
-            processed = pre({"observation.state": torch.zeros(1, 2), "observation.images.top": torch.rand(1, 3, 48, 64),
-                             "observation.goal.images.top": goal, "observation.goal.state": torch.zeros(1, 2)})
+            processed = pre(
+                {
+                    "observation.state": torch.zeros(1, 2),
+                    "observation.images.top": torch.rand(1, 3, 48, 64),
+                    "observation.goal.images.top": goal,
+                    "observation.goal.state": torch.zeros(1, 2),
+                }
+            )
     assert processed["observation.images.top"].shape == (1, 3, 32, 32)
     assert sum("sends (3, 48, 64) frames" in r.message for r in caplog.records) == 1
     assert policy.select_action(processed).shape == (1, 2)

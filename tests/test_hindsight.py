@@ -6,22 +6,27 @@ import numpy as np
 import pytest
 import torch
 from conftest import REPO_ID, tiny_config
-from torch.utils.data import DataLoader
-
 from lerobot.datasets import video_utils
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from torch.utils.data import DataLoader
+
 from lerobot_efm.hindsight import HindsightGoalDataset, HindsightSpec
 
 
 def spec(**overrides) -> HindsightSpec:
-    base = dict(obs_traj_len=3, obs_traj_stride=2, action_traj_len=8, action_traj_stride=1, max_goal_distance=10)
+    base = dict(
+        obs_traj_len=3, obs_traj_stride=2, action_traj_len=8, action_traj_stride=1, max_goal_distance=10
+    )
     return HindsightSpec(**{**base, **overrides})
 
 
 def columns(dataset) -> dict[str, torch.Tensor]:
     """The dataset's rows read through LeRobot's own item access (independent of the wrapper's arrow reads)."""
     items = [dataset[i] for i in range(len(dataset))]
-    return {k: torch.stack([torch.as_tensor(it[k]) for it in items]) for k in ("observation.state", "action", "episode_index")}
+    return {
+        k: torch.stack([torch.as_tensor(it[k]) for it in items])
+        for k in ("observation.state", "action", "episode_index")
+    }
 
 
 @pytest.fixture(scope="module")
@@ -41,8 +46,13 @@ def test_goal_is_a_future_frame_of_the_same_episode(state_dataset, rows):
     for k in torch.randint(0, len(state_dataset), (300,)).tolist():
         item = wrapped[k]
         d = int(item["observation.goal_distance"])
-        assert d == item["observation.goal_distance"] and 0 <= d <= min(40, episode_end(rows["episode_index"], k) - 1 - k)
-        assert rows["episode_index"][k + d] == rows["episode_index"][k] == item["episode_index"] and item["index"] == k
+        assert d == item["observation.goal_distance"] and 0 <= d <= min(
+            40, episode_end(rows["episode_index"], k) - 1 - k
+        )
+        assert (
+            rows["episode_index"][k + d] == rows["episode_index"][k] == item["episode_index"]
+            and item["index"] == k
+        )
         assert torch.equal(item["observation.state"], rows["observation.state"][k])
         assert torch.equal(item["observation.goal.state"], rows["observation.state"][k + d])
 
@@ -52,14 +62,18 @@ def test_goal_distance_covers_zero_to_min_of_horizon_and_frames_left(state_datas
     wrapped = HindsightGoalDataset(state_dataset, spec(max_goal_distance=3))
     counts = np.bincount([int(wrapped[5]["observation.goal_distance"]) for _ in range(400)], minlength=4)
     assert len(counts) == 4 and counts.min() > 60, counts  # 100 expected each
-    near_end = {int(wrapped[57]["observation.goal_distance"]) for _ in range(60)}  # 2 frames left in episode 0
+    near_end = {
+        int(wrapped[57]["observation.goal_distance"]) for _ in range(60)
+    }  # 2 frames left in episode 0
     assert near_end == {0, 1, 2}
     assert {int(wrapped[59]["observation.goal_distance"]) for _ in range(20)} == {0}  # last frame
 
 
 def test_observation_trajectory_is_clamped_at_the_goal(state_dataset, rows):
     """tau^o[j] is o at row k + min(j*S_o, d): it starts at o_k and stays on the goal once reached."""
-    wrapped = HindsightGoalDataset(state_dataset, spec(obs_traj_len=4, obs_traj_stride=3, with_obs_trajectory=True))
+    wrapped = HindsightGoalDataset(
+        state_dataset, spec(obs_traj_len=4, obs_traj_stride=3, with_obs_trajectory=True)
+    )
     clamped = 0
     for k in torch.randint(0, len(state_dataset), (150,)).tolist():
         item = wrapped[k]
@@ -124,7 +138,9 @@ def test_video_goal_frame_matches_the_dataset_frame(video_dataset):
         img = item["observation.images.top"]
         assert img.shape == (3, 32, 32) and img.dtype == torch.float32 and 0 <= img.min() and img.max() <= 1
         assert torch.allclose(img, video_dataset[k]["observation.images.top"], atol=1e-4)
-        assert torch.allclose(item["observation.goal.images.top"], video_dataset[k + d]["observation.images.top"], atol=1e-4)
+        assert torch.allclose(
+            item["observation.goal.images.top"], video_dataset[k + d]["observation.images.top"], atol=1e-4
+        )
     assert not torch.allclose(wrapped[0]["observation.images.top"], wrapped[63]["observation.images.top"])
 
 
@@ -160,7 +176,10 @@ def test_meta_mirrors_stats_and_delegates(state_dataset):
     for name, value in state_dataset.meta.stats["observation.state"].items():
         assert np.array_equal(stats["observation.goal.state"][name], value), name
     assert "observation.goal.state" not in state_dataset.meta.stats  # the base metadata is left untouched
-    assert wrapped.meta.fps == state_dataset.meta.fps == 20 and wrapped.num_frames == state_dataset.num_frames == 180
+    assert (
+        wrapped.meta.fps == state_dataset.meta.fps == 20
+        and wrapped.num_frames == state_dataset.num_frames == 180
+    )
     assert len(wrapped) == len(state_dataset) and wrapped.meta.repo_id == state_dataset.meta.repo_id
 
 
@@ -175,7 +194,11 @@ def test_wrapper_pickles_and_loads_in_worker_processes(state_dataset, rows):
     batches = list(DataLoader(wrapped, batch_size=30, shuffle=True, num_workers=2))
     assert len(batches) == 6 and sorted(torch.cat([b["index"] for b in batches]).tolist()) == list(range(180))
     b = batches[0]
-    assert b["action"].shape == (30, 8, 2) and b["observation.traj.state"].shape == (30, 3, 2) and len(b["task"]) == 30
+    assert (
+        b["action"].shape == (30, 8, 2)
+        and b["observation.traj.state"].shape == (30, 3, 2)
+        and len(b["task"]) == 30
+    )
     assert torch.equal(b["observation.state"], rows["observation.state"][b["index"]])
 
 
@@ -193,7 +216,9 @@ def test_lerobot_image_transforms_apply_to_every_frame_used(video_dataset_root):
 
     plain = HindsightGoalDataset(LeRobotDataset(REPO_ID, root=video_dataset_root), tiny_config("efm_pc"))
     jitter = ImageTransforms(ImageTransformsConfig(enable=True, max_num_transforms=3))
-    augmented = HindsightGoalDataset(LeRobotDataset(REPO_ID, root=video_dataset_root, image_transforms=jitter), tiny_config("efm_pc"))
+    augmented = HindsightGoalDataset(
+        LeRobotDataset(REPO_ID, root=video_dataset_root, image_transforms=jitter), tiny_config("efm_pc")
+    )
     torch.manual_seed(0)
     a = plain[5]
     torch.manual_seed(0)

@@ -12,30 +12,50 @@ import pytest
 import torch
 from conftest import EFM_TYPES, REPO_ID
 from inprocess_train import train_one_step
-from safetensors.torch import load_file
-
 from lerobot.policies.factory import get_policy_class
+from safetensors.torch import load_file
 
 BIN = Path(sys.executable).parent
 REPO = Path(__file__).resolve().parents[1]
 TINY_FLAGS = [
-    "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.max_goal_distance=40", "--policy.obs_traj_stride=4",
-    "--policy.mlp_hidden_dims=[32,32]", "--policy.unet_down_dims=[8,16,16]", "--policy.unet_n_groups=4",
-    "--policy.num_candidates=4", "--policy.num_inference_steps=3", "--policy.reached_augment_size=4",
-    "--wandb.enable=false", "--num_workers=0", "--batch_size=8", "--log_freq=1",
+    "--policy.device=cpu",
+    "--policy.push_to_hub=false",
+    "--policy.max_goal_distance=40",
+    "--policy.obs_traj_stride=4",
+    "--policy.mlp_hidden_dims=[32,32]",
+    "--policy.unet_down_dims=[8,16,16]",
+    "--policy.unet_n_groups=4",
+    "--policy.num_candidates=4",
+    "--policy.num_inference_steps=3",
+    "--policy.reached_augment_size=4",
+    "--wandb.enable=false",
+    "--num_workers=0",
+    "--batch_size=8",
+    "--log_freq=1",
 ]
 
 
 def run(cli: str, *args: str, timeout: int = 300) -> subprocess.CompletedProcess:
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.run([str(BIN / cli), *args], capture_output=True, text=True, timeout=timeout, env=env, cwd=REPO)
-    assert proc.returncode == 0, f"{cli} failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-6000:]}"
+    proc = subprocess.run(
+        [str(BIN / cli), *args], capture_output=True, text=True, timeout=timeout, env=env, cwd=REPO
+    )
+    assert proc.returncode == 0, (
+        f"{cli} failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-6000:]}"
+    )
     return proc
 
 
 def train(root, out, policy_type, *extra):
-    return run("lerobot-train", f"--policy.type={policy_type}", f"--dataset.repo_id={REPO_ID}", f"--dataset.root={root}",
-               f"--output_dir={out}", *TINY_FLAGS, *extra)
+    return run(
+        "lerobot-train",
+        f"--policy.type={policy_type}",
+        f"--dataset.repo_id={REPO_ID}",
+        f"--dataset.root={root}",
+        f"--output_dir={out}",
+        *TINY_FLAGS,
+        *extra,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +65,9 @@ def trained(tmp_path_factory, state_dataset_root):
     for policy_type in EFM_TYPES:
         out = tmp_path_factory.mktemp("runs") / policy_type
         rl = [] if policy_type == "efm_gc" else ["--policy.use_rl=true"]
-        workers = ["--num_workers=2"] if policy_type == "efm_pc" else []  # worker processes pickle the wrapper
+        workers = (
+            ["--num_workers=2"] if policy_type == "efm_pc" else []
+        )  # worker processes pickle the wrapper
         proc = train(state_dataset_root, out, policy_type, "--steps=3", "--save_freq=3", *rl, *workers)
         runs[policy_type] = (out / "checkpoints" / "last" / "pretrained_model", proc.stderr + proc.stdout)
     return runs
@@ -59,9 +81,13 @@ def test_lerobot_train_checkpoint(trained, policy_type):
     assert config["type"] == policy_type and "observation.goal.state" in config["input_features"]
     weights = load_file(ckpt / "model.safetensors")
     assert any(k.startswith("ema_model.") for k in weights) and any(k.startswith("model.") for k in weights)
-    assert weights["ema_updates"].item() == 3  # lerobot-train called policy.update() after each of the 3 steps
+    assert (
+        weights["ema_updates"].item() == 3
+    )  # lerobot-train called policy.update() after each of the 3 steps
     stats = load_file(next(ckpt.glob("policy_preprocessor_step_*_normalizer_processor.safetensors")))
-    assert torch.equal(stats["observation.goal.state.min"], stats["observation.state.min"])  # goals use obs stats
+    assert torch.equal(
+        stats["observation.goal.state.min"], stats["observation.state.min"]
+    )  # goals use obs stats
     policy = get_policy_class(policy_type).from_pretrained(ckpt)
     assert policy.config.use_rl == (policy_type != "efm_gc")
     for key, value in policy.state_dict().items():
@@ -70,8 +96,15 @@ def test_lerobot_train_checkpoint(trained, policy_type):
 
 def test_lerobot_eval_takes_the_goal_from_the_env(trained, tmp_path):
     ckpt, _ = trained["efm_ac"]
-    run("lerobot-eval", f"--policy.path={ckpt}", "--env.type=efm_point_reach", "--eval.n_episodes=2",
-        "--eval.batch_size=2", "--policy.device=cpu", f"--output_dir={tmp_path}")
+    run(
+        "lerobot-eval",
+        f"--policy.path={ckpt}",
+        "--env.type=efm_point_reach",
+        "--eval.n_episodes=2",
+        "--eval.batch_size=2",
+        "--policy.device=cpu",
+        f"--output_dir={tmp_path}",
+    )
     info = json.loads((tmp_path / "eval_info.json").read_text())
     assert "pc_success" in info["overall"] and info["overall"]["n_episodes"] == 2
 
@@ -107,7 +140,9 @@ def long_state_dataset_root(tmp_path_factory):
 
 
 # The Talos configs name the Talos features: tests/test_talos_record.py trains them on a Talos recording.
-GENERIC_CONFIGS = sorted(p.name for p in (REPO / "train_configs").glob("*.json") if not p.name.startswith("talos_"))
+GENERIC_CONFIGS = sorted(
+    p.name for p in (REPO / "train_configs").glob("*.json") if not p.name.startswith("talos_")
+)
 
 
 @pytest.mark.parametrize("config_file", GENERIC_CONFIGS)
@@ -115,10 +150,18 @@ def test_shipped_train_configs(long_state_dataset_root, tmp_path, config_file):
     """Config drift, in-process (tests/inprocess_train.py): each shipped config is parsed with CLI overrides,
     validated and trains one step the way lerobot-train builds its run; the console script itself is
     exercised by the runs above."""
-    policy = train_one_step(REPO / "train_configs" / config_file, f"--dataset.root={long_state_dataset_root}",
-                            f"--dataset.repo_id={REPO_ID}", "--policy.device=cpu", f"--output_dir={tmp_path / 'run'}",
-                            "--batch_size=8", "--num_workers=0")
-    assert policy.config.type == json.loads((REPO / "train_configs" / config_file).read_text())["policy"]["type"]
+    policy = train_one_step(
+        REPO / "train_configs" / config_file,
+        f"--dataset.root={long_state_dataset_root}",
+        f"--dataset.repo_id={REPO_ID}",
+        "--policy.device=cpu",
+        f"--output_dir={tmp_path / 'run'}",
+        "--batch_size=8",
+        "--num_workers=0",
+    )
+    assert (
+        policy.config.type == json.loads((REPO / "train_configs" / config_file).read_text())["policy"]["type"]
+    )
 
 
 def test_push_to_hub_goes_through_lerobots_path_with_an_efm_card(trained, tmp_path, monkeypatch):
@@ -152,8 +195,17 @@ def test_push_to_hub_goes_through_lerobots_path_with_an_efm_card(trained, tmp_pa
 def test_lerobot_train_on_a_video_dataset(video_dataset_root, tmp_path):
     """Camera frames (o, g and tau^o) are decoded from the videos inside lerobot-train's DataLoader workers."""
     out = tmp_path / "run"
-    proc = train(video_dataset_root, out, "efm_pc", "--steps=2", "--save_freq=2", "--num_workers=1",
-                 "--policy.image_encoder_channels=[4,8,8]", "--policy.image_encoder_hidden_dim=16", "--policy.image_latent_dim=8")
+    proc = train(
+        video_dataset_root,
+        out,
+        "efm_pc",
+        "--steps=2",
+        "--save_freq=2",
+        "--num_workers=1",
+        "--policy.image_encoder_channels=[4,8,8]",
+        "--policy.image_encoder_hidden_dim=16",
+        "--policy.image_latent_dim=8",
+    )
     assert "loss_planner" in proc.stderr + proc.stdout
     config = json.loads((out / "checkpoints" / "last" / "pretrained_model" / "config.json").read_text())
     assert config["input_features"]["observation.goal.images.top"]["type"] == "VISUAL"
@@ -162,8 +214,19 @@ def test_lerobot_train_on_a_video_dataset(video_dataset_root, tmp_path):
 def test_an_invalid_option_reaches_the_user_with_its_reason(tmp_path):
     """draccus reports only "Couldn't instantiate class EFMACConfig"; the reason must be printed too."""
     env = {**os.environ, "HF_HUB_OFFLINE": "1"}
-    proc = subprocess.run([str(BIN / "lerobot-train"), "--policy.type=efm_ac", "--policy.action_traj_len=7",
-                           f"--dataset.repo_id={REPO_ID}", f"--output_dir={tmp_path / 'out'}"],
-                          capture_output=True, text=True, timeout=300, env=env, cwd=REPO)
+    proc = subprocess.run(
+        [
+            str(BIN / "lerobot-train"),
+            "--policy.type=efm_ac",
+            "--policy.action_traj_len=7",
+            f"--dataset.repo_id={REPO_ID}",
+            f"--output_dir={tmp_path / 'out'}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+        cwd=REPO,
+    )
     assert proc.returncode != 0
     assert "action_traj_len=7 must be divisible by 8" in proc.stdout + proc.stderr, proc.stderr[-3000:]

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import torch
 from conftest import EFM_TYPES, tiny_config
+from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 from torch import nn
 from torch.testing import assert_close
 
-from lerobot.configs.types import FeatureType, PolicyFeature
-from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 from lerobot_efm.agents import make_agent
 
 STATE, IMAGE = "observation.state", "observation.images.top"
@@ -122,7 +122,9 @@ def test_bootstrap_eps_is_drawn_uniformly_in_0_rg():
 
 def test_bootstrap_bridge_is_conditioned_on_the_ema_latents_of_g_and_g_prime():
     """Fails if the bridge is computed from (o, g') or (g', g) instead of (g, g'), or with the online encoder."""
-    policy = make("efm_ac", use_rl=True, rl_goal_ratio=0.0, num_critics=2, state_encoder="mlp", state_latent_dim=8)
+    policy = make(
+        "efm_ac", use_rl=True, rl_goal_ratio=0.0, num_critics=2, state_encoder="mlp", state_latent_dim=8
+    )
     perturb(policy.model.encoder)  # online latents differ from the EMA ones
     w, c = torch.randn(2, 16), torch.tensor([0.3, -0.2])
     policy.ema_model.critic.net = LinearVelocity(w, c)
@@ -232,7 +234,9 @@ def test_training_rows_hindsight_reached_and_goal_free():
     assert_close(gc.obs[reached], l_obs[:n])
     assert_close(gc.goal[reached], l_obs[:n])  # g := o
     assert torch.equal(gc.distance[reached], torch.zeros(n))
-    assert torch.equal(gc.actions[reached], batch["action"][:n, :1].expand(-1, cfg.action_traj_len, -1))  # hold a_k
+    assert torch.equal(
+        gc.actions[reached], batch["action"][:n, :1].expand(-1, cfg.action_traj_len, -1)
+    )  # hold a_k
     assert_close(gc.obs_traj[reached], traj[:n, :1].expand(-1, cfg.obs_traj_len, -1))  # nothing moves
 
     assert gc.obs.shape[0] == 2 * b + n and free.obs.shape[0] == b + n
@@ -256,13 +260,25 @@ def test_reached_rows_rest_for_velocity_commands():
 # (hindsight + reached + eq. 5), "free": rows without the eq. (5) duplicates; "d" is the distance column.
 TABLE_I = {
     "efm_gc": {"actor": ("gc", ["obs", "goal"], "actions")},
-    "efm_ac": {"critic": ("gc", ["obs", "goal"], "distance"), "actor": ("gc", ["obs", "goal", "d"], "actions")},
-    "efm_pc": {"critic": ("gc", ["obs", "goal"], "distance"), "planner": ("gc", ["obs", "goal", "d"], "obs_traj"),
-               "actor": ("free", ["obs", "obs_traj"], "actions")},
-    "efm_ps": {"critic": ("gc", ["obs", "goal"], "distance"), "planner": ("free", ["obs"], "obs_traj"),
-               "actor": ("free", ["obs", "obs_traj"], "actions")},
-    "efm_as": {"critic": ("gc", ["obs", "goal"], "distance"), "actor": ("free", ["obs"], "actions"),
-               "world": ("free", ["obs", "actions"], "obs_traj")},
+    "efm_ac": {
+        "critic": ("gc", ["obs", "goal"], "distance"),
+        "actor": ("gc", ["obs", "goal", "d"], "actions"),
+    },
+    "efm_pc": {
+        "critic": ("gc", ["obs", "goal"], "distance"),
+        "planner": ("gc", ["obs", "goal", "d"], "obs_traj"),
+        "actor": ("free", ["obs", "obs_traj"], "actions"),
+    },
+    "efm_ps": {
+        "critic": ("gc", ["obs", "goal"], "distance"),
+        "planner": ("free", ["obs"], "obs_traj"),
+        "actor": ("free", ["obs", "obs_traj"], "actions"),
+    },
+    "efm_as": {
+        "critic": ("gc", ["obs", "goal"], "distance"),
+        "actor": ("free", ["obs"], "actions"),
+        "world": ("free", ["obs", "actions"], "obs_traj"),
+    },
 }
 
 
@@ -275,16 +291,23 @@ def test_each_component_trains_on_its_table_i_conditioning(policy_type):
     rows = agent.training_rows(hand_batch(policy.config, 4), policy.ema_model)
     seen = {}
     for name in TABLE_I[policy_type]:
+
         def record(cond, target, _name=name):
             seen[_name] = (cond, target)
             return cond.sum() * 0
+
         getattr(agent, name).loss = record
     losses = agent.losses(rows)
     assert set(losses) == set(TABLE_I[policy_type])
     for name, (which, cond_parts, target_field) in TABLE_I[policy_type].items():
         r = rows.goal_conditioned if which == "gc" else rows.goal_free
-        parts = {"obs": r.obs, "goal": r.goal, "d": r.distance[:, None], "actions": r.actions.flatten(1),
-                 "obs_traj": None if r.obs_traj is None else r.obs_traj.flatten(1)}
+        parts = {
+            "obs": r.obs,
+            "goal": r.goal,
+            "d": r.distance[:, None],
+            "actions": r.actions.flatten(1),
+            "obs_traj": None if r.obs_traj is None else r.obs_traj.flatten(1),
+        }
         cond, target = seen[name]
         assert torch.equal(cond, torch.cat([parts[p] for p in cond_parts], -1)), name
         assert torch.equal(target, getattr(r, target_field)), name
@@ -441,7 +464,9 @@ def test_fm_ac_learns_to_head_for_held_out_goals():
     episodes = [play_episode(rng, 200, wall=False) for _ in range(20)]
     states = torch.tensor(np.stack([s for s, _ in episodes]), dtype=torch.float32)
     commands = torch.tensor(np.stack([a for _, a in episodes]), dtype=torch.float32)
-    policy = make("efm_ac", ema_cutoff=20.0, ema_warmup_updates=10, num_inference_steps=5, mlp_hidden_dims=(64, 64))
+    policy = make(
+        "efm_ac", ema_cutoff=20.0, ema_warmup_updates=10, num_inference_steps=5, mlp_hidden_dims=(64, 64)
+    )
     cfg = policy.config
     n_ep, length, _ = states.shape
     g = torch.Generator().manual_seed(1)
@@ -450,7 +475,11 @@ def test_fm_ac_learns_to_head_for_held_out_goals():
         """Hindsight relabelling as lerobot_efm.hindsight does it: d ~ U{0..min(L_g, left)}, actions held past d."""
         ep = torch.randint(0, n_ep, (n,), generator=g)
         k = torch.randint(0, length - cfg.trajectory_window, (n,), generator=g)
-        d = (torch.rand(n, generator=g) * (torch.clamp(length - 1 - k, max=cfg.max_goal_distance) + 1)).floor().long()
+        d = (
+            (torch.rand(n, generator=g) * (torch.clamp(length - 1 - k, max=cfg.max_goal_distance) + 1))
+            .floor()
+            .long()
+        )
         offsets = torch.minimum(torch.arange(cfg.action_traj_len)[None], d[:, None])
         actions = commands[ep[:, None], k[:, None] + offsets]
         return {STATE: states[ep, k], GOAL: states[ep, k + d], DIST: d.float(), "action": actions}
@@ -474,7 +503,10 @@ def test_fm_ac_learns_to_head_for_held_out_goals():
         if np.all(np.abs(goal) < 0.9):
             obs.append(o)
             goals.append(goal)
-    obs, goals = torch.tensor(np.array(obs), dtype=torch.float32), torch.tensor(np.array(goals), dtype=torch.float32)
+    obs, goals = (
+        torch.tensor(np.array(obs), dtype=torch.float32),
+        torch.tensor(np.array(goals), dtype=torch.float32),
+    )
     torch.manual_seed(3)
     chunk = policy.predict_action_chunk({STATE: obs, GOAL: goals})
     heading = torch.nn.functional.cosine_similarity(chunk[:, -1] - obs, goals - obs, dim=-1)
@@ -493,20 +525,34 @@ def test_processor_normalises_mirrors_with_the_observation_stats(tmp_path):
     after saving and reloading the processor. Fails if a mirror family lacks its statistics (it would pass
     through raw) or uses other statistics."""
     image = PolicyFeature(type=FeatureType.VISUAL, shape=(3, 8, 8))
-    cfg = state_config("efm_pc", use_rl=True, device="cpu",
-                       input_features={STATE: PolicyFeature(type=FeatureType.STATE, shape=(2,)), IMAGE: image})
+    cfg = state_config(
+        "efm_pc",
+        use_rl=True,
+        device="cpu",
+        input_features={STATE: PolicyFeature(type=FeatureType.STATE, shape=(2,)), IMAGE: image},
+    )
     lo, hi = torch.tensor([-2.0, 0.0]), torch.tensor([2.0, 10.0])
     stats = {
         STATE: {"min": lo, "max": hi, "mean": torch.zeros(2), "std": torch.ones(2)},
-        IMAGE: {"min": torch.zeros(3, 1, 1), "max": torch.ones(3, 1, 1), "mean": torch.full((3, 1, 1), 0.5),
-                "std": torch.full((3, 1, 1), 0.2)},
+        IMAGE: {
+            "min": torch.zeros(3, 1, 1),
+            "max": torch.ones(3, 1, 1),
+            "mean": torch.full((3, 1, 1), 0.5),
+            "std": torch.full((3, 1, 1), 0.2),
+        },
         "action": {"min": -torch.ones(2), "max": torch.ones(2), "mean": torch.zeros(2), "std": torch.ones(2)},
     }
     pre, post = make_pre_post_processors(cfg, dataset_stats=stats)
     g = torch.Generator().manual_seed(0)
     raw_state = lambda *shape: lo + (hi - lo) * torch.rand(*shape, 2, generator=g)  # noqa: E731
-    batch = {STATE: raw_state(3), GOAL: raw_state(3), RL_GOAL: raw_state(3), TRAJ: raw_state(3, cfg.obs_traj_len),
-             DIST: torch.tensor([5.0, 17.0, 33.0]), "action": torch.zeros(3, cfg.action_traj_len, 2)}
+    batch = {
+        STATE: raw_state(3),
+        GOAL: raw_state(3),
+        RL_GOAL: raw_state(3),
+        TRAJ: raw_state(3, cfg.obs_traj_len),
+        DIST: torch.tensor([5.0, 17.0, 33.0]),
+        "action": torch.zeros(3, cfg.action_traj_len, 2),
+    }
     for prefix in ("observation.", "observation.goal.", "observation.rl_goal."):
         batch[prefix + "images.top"] = torch.rand(3, 3, 8, 8, generator=g)
     batch["observation.traj.images.top"] = torch.rand(3, cfg.obs_traj_len, 3, 8, 8, generator=g)

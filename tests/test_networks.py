@@ -6,7 +6,12 @@ import torch.nn.functional as F
 
 from lerobot_efm.flow import euler_integrate
 from lerobot_efm.networks import (
-    ConditionalUnet1d, EnsembleMLPFlow, FiLMResidualBlock1d, ImpalaEncoder, ImpalaResidualBlock, ObservationEncoder,
+    ConditionalUnet1d,
+    EnsembleMLPFlow,
+    FiLMResidualBlock1d,
+    ImpalaEncoder,
+    ImpalaResidualBlock,
+    ObservationEncoder,
 )
 
 
@@ -34,8 +39,11 @@ def test_unet_routes_each_blocks_cached_film_to_that_block():
     """condition(c)[i] is exactly what the i-th executed block receives, and equals its own film_cond(c)."""
     net, c = small_unet(), torch.randn(2, 5)
     calls = []
-    hooks = [m.register_forward_pre_hook(lambda m, args: calls.append((m, args[1]))) for m in net.modules()
-             if isinstance(m, FiLMResidualBlock1d)]
+    hooks = [
+        m.register_forward_pre_hook(lambda m, args: calls.append((m, args[1])))
+        for m in net.modules()
+        if isinstance(m, FiLMResidualBlock1d)
+    ]
     cache = net.condition(c)
     net.velocity(torch.randn(2, 8, 3), torch.tensor(0.3), cache)
     for h in hooks:
@@ -86,7 +94,9 @@ def test_unet_gradient_reaches_every_parameter():
 # --- EnsembleMLPFlow -------------------------------------------------------------------------------
 
 
-def reference_member(net: EnsembleMLPFlow, e: int, x: torch.Tensor, t: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+def reference_member(
+    net: EnsembleMLPFlow, e: int, x: torch.Tensor, t: torch.Tensor, c: torch.Tensor
+) -> torch.Tensor:
     """Member e written as a plain MLP on [x, t, c]: Linear, then (SiLU, LayerNorm, Linear) per hidden layer."""
     h = torch.cat([x, t.expand(x.shape[0], 1), c], -1)
     h = F.linear(h, net.weights[0][e].T, net.biases[0][e, 0])
@@ -114,13 +124,20 @@ def test_ensemble_mlp_matches_a_plain_per_member_mlp():
     t_scalar, t_rows = torch.tensor(0.37), torch.rand(3, 5, 1)
     out_scalar, out_rows = net(x, t_scalar, c), net(x, t_rows, c)
     for e in range(3):
-        assert torch.allclose(out_scalar[e], reference_member(net, e, x[e], t_scalar.reshape(1, 1), c), atol=1e-5)
+        assert torch.allclose(
+            out_scalar[e], reference_member(net, e, x[e], t_scalar.reshape(1, 1), c), atol=1e-5
+        )
         assert torch.allclose(out_rows[e], reference_member(net, e, x[e], t_rows[e], c), atol=1e-5)
 
 
 def test_ensemble_members_are_independent():
     """Perturbing member 0's weights changes member 0's output only."""
-    net, x, t, c = EnsembleMLPFlow(3, 4, 6, (16, 16)), torch.randn(3, 5, 4), torch.tensor(0.5), torch.randn(5, 6)
+    net, x, t, c = (
+        EnsembleMLPFlow(3, 4, 6, (16, 16)),
+        torch.randn(3, 5, 4),
+        torch.tensor(0.5),
+        torch.randn(5, 6),
+    )
     before = net(x, t, c).detach()
     with torch.no_grad():
         for p in [*net.weights, *net.biases, *net.norm_weights, *net.norm_biases]:
@@ -160,13 +177,25 @@ def test_impala_residual_blocks_use_two_distinct_trained_convs():
 
 
 def observation_encoder(state_encoder="identity", **kwargs):
-    return ObservationEncoder({"images.top": (3, 32, 32)}, {"state": 2, "environment_state": 3}, 8, (4, 8, 8), 16,
-                              0.2, state_encoder, 12, **kwargs).eval()
+    return ObservationEncoder(
+        {"images.top": (3, 32, 32)},
+        {"state": 2, "environment_state": 3},
+        8,
+        (4, 8, 8),
+        16,
+        0.2,
+        state_encoder,
+        12,
+        **kwargs,
+    ).eval()
 
 
 def observation(prefix="observation."):
-    return {prefix + "images.top": torch.rand(4, 3, 32, 32), prefix + "state": torch.randn(4, 2),
-            prefix + "environment_state": torch.randn(4, 3)}
+    return {
+        prefix + "images.top": torch.rand(4, 3, 32, 32),
+        prefix + "state": torch.randn(4, 2),
+        prefix + "environment_state": torch.randn(4, 3),
+    }
 
 
 def test_observation_encoder_concatenates_images_then_sorted_vectors():
@@ -175,7 +204,9 @@ def test_observation_encoder_concatenates_images_then_sorted_vectors():
     out = enc(obs)
     assert enc.latent_dim == 13 and out.shape == (4, 13)
     assert torch.allclose(out[:, :8], enc.images["images__top"](obs["observation.images.top"]))
-    assert torch.equal(out[:, 8:11], obs["observation.environment_state"]) and torch.equal(out[:, 11:], obs["observation.state"])
+    assert torch.equal(out[:, 8:11], obs["observation.environment_state"]) and torch.equal(
+        out[:, 11:], obs["observation.state"]
+    )
 
 
 def test_observation_encoder_reads_mirrored_keys_with_the_same_weights():
@@ -188,7 +219,7 @@ def test_observation_encoder_reads_mirrored_keys_with_the_same_weights():
 
 
 def test_observation_encoder_mlp_size_and_invalid_choice():
-    """"mlp" encodes each vector key to state_latent_dim; an unknown state_encoder raises ValueError."""
+    """ "mlp" encodes each vector key to state_latent_dim; an unknown state_encoder raises ValueError."""
     enc = observation_encoder("mlp")
     assert enc.latent_dim == 8 + 2 * 12 and enc(observation()).shape == (4, 32)
     with pytest.raises(ValueError, match="state_encoder.*'conv'"):

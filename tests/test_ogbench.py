@@ -5,16 +5,24 @@ import numpy as np
 import pytest
 import torch
 from conftest import tiny_config
-
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env, make_env_config
 from lerobot.envs.utils import env_to_policy_features, preprocess_observation
+
 from lerobot_efm.hindsight import HindsightGoalDataset
 from lerobot_efm.ogbench import OGBENCH_GYM_ID, OGBenchEnv, OGBenchEnvConfig
 from lerobot_efm.ogbench.convert import convert_arrays, convert_npz, load_raw
 from lerobot_efm.ogbench.generate import (
-    cells_at_distance, evaluate_oracle, free_cells, generate_pointmaze, main as generate_main, oracle_direction, save_pointmaze_npz,
+    cells_at_distance,
+    evaluate_oracle,
+    free_cells,
+    generate_pointmaze,
+    oracle_direction,
+    save_pointmaze_npz,
+)
+from lerobot_efm.ogbench.generate import (
+    main as generate_main,
 )
 
 NAV, STITCH = "pointmaze-large-navigate-v0", "pointmaze-large-stitch-v0"
@@ -76,7 +84,10 @@ def test_npz_files_load_with_ogbench(tmp_path):
     train_path, val_path = save_pointmaze_npz(STITCH, tmp_path, num_episodes=10, episode_steps=STEPS, seed=2)
     assert (train_path.name, val_path.name) == (f"{STITCH}.npz", f"{STITCH}-val.npz")
     _, train, val = ogbench.make_env_and_datasets(STITCH, dataset_path=str(train_path))
-    assert train["observations"].shape == (10 * (STEPS - 1), 2) and val["observations"].shape == (STEPS - 1, 2)
+    assert train["observations"].shape == (10 * (STEPS - 1), 2) and val["observations"].shape == (
+        STEPS - 1,
+        2,
+    )
     np.testing.assert_array_equal(train["next_observations"][0], train["observations"][1])
 
 
@@ -85,19 +96,26 @@ def test_convert_round_trip_and_hindsight(raw, tmp_path):
     ds = convert_arrays(data, tmp_path / "lr", "local/ogbench_test", task=STITCH)
     ds = LeRobotDataset("local/ogbench_test", root=tmp_path / "lr")
     assert ds.num_episodes == 3 and ds.num_frames == 3 * STEPS and ds.fps == 10
-    assert ds.features["observation.state"]["shape"] == (2,) and ds.features["action"]["names"] == ["vx", "vy"]
+    assert ds.features["observation.state"]["shape"] == (2,) and ds.features["action"]["names"] == [
+        "vx",
+        "vy",
+    ]
     states = torch.stack([ds[i]["observation.state"] for i in range(0, ds.num_frames, 50)])
     np.testing.assert_array_equal(states.numpy(), data["observations"][::50])
     assert ds[STEPS]["episode_index"] == 1 and ds[STEPS]["frame_index"] == 0 and ds[0]["task"] == STITCH
 
-    cfg = tiny_config("efm_ac", action_mode="velocity", obs_traj_len=4, obs_traj_stride=16, max_goal_distance=200)
+    cfg = tiny_config(
+        "efm_ac", action_mode="velocity", obs_traj_len=4, obs_traj_stride=16, max_goal_distance=200
+    )
     wrapped = HindsightGoalDataset(ds, cfg)
     for k in (0, 60, STEPS + 90, 3 * STEPS - 1):
         item = wrapped[k]
         d = int(item["observation.goal_distance"])
         assert item["action"].shape == (8, 2) and item["observation.goal.state"].shape == (2,)
         assert torch.all(item["action"][d:] == 0)  # velocity: no command past the goal
-        torch.testing.assert_close(item["observation.goal.state"], torch.from_numpy(data["observations"][k + d]))
+        torch.testing.assert_close(
+            item["observation.goal.state"], torch.from_numpy(data["observations"][k + d])
+        )
 
 
 def test_cli_generate_and_convert(tmp_path, capsys):
@@ -113,10 +131,20 @@ def test_bad_npz_errors_name_the_key(tmp_path):
     np.savez(tmp_path / "nokey.npz", observations=np.zeros((4, 2)), terminals=np.ones(4, bool))
     with pytest.raises(KeyError, match=r"nokey\.npz.*'actions'"):
         load_raw(tmp_path / "nokey.npz")
-    np.savez(tmp_path / "shape.npz", observations=np.zeros((4, 2)), actions=np.zeros((3, 2)), terminals=np.ones(4, bool))
+    np.savez(
+        tmp_path / "shape.npz",
+        observations=np.zeros((4, 2)),
+        actions=np.zeros((3, 2)),
+        terminals=np.ones(4, bool),
+    )
     with pytest.raises(ValueError, match=r"shape\.npz.*'actions'"):
         load_raw(tmp_path / "shape.npz")
-    np.savez(tmp_path / "open.npz", observations=np.zeros((4, 2)), actions=np.zeros((4, 2)), terminals=np.zeros(4, bool))
+    np.savez(
+        tmp_path / "open.npz",
+        observations=np.zeros((4, 2)),
+        actions=np.zeros((4, 2)),
+        terminals=np.zeros(4, bool),
+    )
     with pytest.raises(ValueError, match="'terminals'"):
         load_raw(tmp_path / "open.npz")
     with pytest.raises(FileNotFoundError, match="missing.npz"):
@@ -149,11 +177,15 @@ def test_make_env_keys_and_seeded_task_cycle():
         assert vec.call("task_id") == (3,) and "task3" in vec.call("task_description")[0]  # 7 % 5 + 1
         batch = preprocess_observation(obs)
         assert set(batch) == {"observation.state", "observation.goal.state"}
-        assert batch["observation.state"].shape == (1, 2) and batch["observation.state"].dtype == torch.float32
+        assert (
+            batch["observation.state"].shape == (1, 2) and batch["observation.state"].dtype == torch.float32
+        )
         goal = obs["goal.state"].copy()
         for _ in range(5):
             obs, reward, terminated, truncated, info = vec.step(np.array([[1.0, 0.0]], np.float32))
-        assert "is_success" in info and not info["is_success"][0] and vec.call("_max_episode_steps") == (1000,)
+        assert (
+            "is_success" in info and not info["is_success"][0] and vec.call("_max_episode_steps") == (1000,)
+        )
         np.testing.assert_array_equal(obs["goal.state"], goal)
         again, _ = vec.reset(seed=[7])  # the global-RNG noise of start/goal is reproducible
         np.testing.assert_array_equal(again["goal.state"], goal)
@@ -167,12 +199,18 @@ def test_oracle_succeeds_and_terminates():
     for seed in (0, 1):
         obs, _ = env.reset(seed=seed)
         start = obs["agent_pos"].copy()
-        for steps in range(1, 1001):
-            obs, reward, terminated, truncated, info = env.step(oracle_direction(env.unwrapped.maze, exact_goal=True))
+        for steps in range(1, 1001):  # noqa: B007 (read after the loop)
+            obs, reward, terminated, truncated, info = env.step(
+                oracle_direction(env.unwrapped.maze, exact_goal=True)
+            )
             if terminated or truncated:
                 break
         assert terminated and info["is_success"] and reward == 1.0 and steps < 400
-        assert np.linalg.norm(obs["agent_pos"] - obs["goal.state"]) <= 1.0 < np.linalg.norm(start - obs["goal.state"])
+        assert (
+            np.linalg.norm(obs["agent_pos"] - obs["goal.state"])
+            <= 1.0
+            < np.linalg.norm(start - obs["goal.state"])
+        )
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.shape == (9 * 24, 12 * 24, 3)
     env.close()

@@ -12,7 +12,9 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("paper_experiments", REPO / "benchmarks" / "paper_experiments.py")
+spec = importlib.util.spec_from_file_location(
+    "paper_experiments", REPO / "benchmarks" / "paper_experiments.py"
+)
 pe = importlib.util.module_from_spec(spec)
 sys.modules["paper_experiments"] = pe  # dataclasses look their module up there
 spec.loader.exec_module(pe)
@@ -22,7 +24,13 @@ def eval_info(successes, sum_rewards=None):
     n = len(successes)
     sum_rewards = [0.0] * n if sum_rewards is None else sum_rewards
     return {
-        "per_task": [{"task_group": "ogbench", "task_id": 0, "metrics": {"successes": successes, "sum_rewards": sum_rewards}}],
+        "per_task": [
+            {
+                "task_group": "ogbench",
+                "task_id": 0,
+                "metrics": {"successes": successes, "sum_rewards": sum_rewards},
+            }
+        ],
         "overall": {"pc_success": 100.0 * sum(successes) / n, "n_episodes": n},
     }
 
@@ -33,10 +41,18 @@ def test_parse_eval_info_splits_episodes_by_seed_task():
     out = pe.parse_eval_info(eval_info(ok), num_tasks=5, task_prefix="task", first_task=1)
     assert out["pc_success"] == 40.0 and out["n_episodes"] == 10 and out["n_success"] == 4
     assert {k: v["pc_success"] for k, v in out["per_task"].items()} == {
-        "task1": 100.0, "task2": 50.0, "task3": 50.0, "task4": 0.0, "task5": 0.0}
+        "task1": 100.0,
+        "task2": 50.0,
+        "task3": 50.0,
+        "task4": 0.0,
+        "task5": 0.0,
+    }
     closed = [1.0, 0.2, 0.9, -0.1, 0.0, 1.0, 0.95, 0.3, 0.1, 0.05]  # progress reward sums
     planar = pe.parse_eval_info(eval_info(ok, closed), num_tasks=10, task_prefix="pair", first_task=0, seed=7)
-    assert planar["per_task"]["pair7"]["pc_success"] == 100.0 and planar["per_task"]["pair8"]["pc_success"] == 0.0
+    assert (
+        planar["per_task"]["pair7"]["pc_success"] == 100.0
+        and planar["per_task"]["pair8"]["pc_success"] == 0.0
+    )
     assert planar["mean_sum_reward"] == pytest.approx(0.44)
     assert planar["per_task"]["pair0"]["mean_sum_reward"] == pytest.approx(-0.1)  # seed 1010 -> pair0
     suite = pe.SUITES["planar_push"]
@@ -79,14 +95,32 @@ def test_results_table_sets_ours_next_to_paper():
 
 
 def budget_args(**kw):
-    base = dict(device="cpu", steps=None, batch_size=None, eval_episodes=None, eval_batch_size=10, eval_async=False,
-                ema_cutoff=None, jobs=1, train_arg=[], eval_arg=[], config=None, seed=1000, curve_points=1)
+    base = dict(
+        device="cpu",
+        steps=None,
+        batch_size=None,
+        eval_episodes=None,
+        eval_batch_size=10,
+        eval_async=False,
+        ema_cutoff=None,
+        jobs=1,
+        train_arg=[],
+        eval_arg=[],
+        config=None,
+        seed=1000,
+        curve_points=1,
+    )
     return argparse.Namespace(**{**base, **kw})
 
 
 def test_budgets_state_cpu_defaults_and_check_episodes():
     cpu = pe.resolve_budget(budget_args(), pe.SUITES["ogbench"])
-    assert (cpu.steps, cpu.batch_size, cpu.eval_episodes, cpu.num_workers) == (pe.CPU_STEPS, pe.CPU_BATCH, 10, 0)
+    assert (cpu.steps, cpu.batch_size, cpu.eval_episodes, cpu.num_workers) == (
+        pe.CPU_STEPS,
+        pe.CPU_BATCH,
+        10,
+        0,
+    )
     assert cpu.ema_cutoff == pe.CPU_STEPS / 10  # shorter than the paper's 5000 at 2000 steps
     gpu = pe.resolve_budget(budget_args(device="cuda"), pe.SUITES["planar_push"])
     assert (gpu.steps, gpu.batch_size, gpu.eval_episodes, gpu.ema_cutoff) == (200_000, 128, 60, None)
@@ -96,8 +130,10 @@ def test_budgets_state_cpu_defaults_and_check_episodes():
 
 def test_budget_config_seed_and_curve_name_the_runs():
     suite = pe.SUITES["planar_push"]
-    budget = pe.resolve_budget(budget_args(steps=12000, batch_size=128, config="planar_push_efm_cpu.json", seed=3,
-                                           curve_points=4), suite)
+    budget = pe.resolve_budget(
+        budget_args(steps=12000, batch_size=128, config="planar_push_efm_cpu.json", seed=3, curve_points=4),
+        suite,
+    )
     assert pe.budget_tag(budget) == "cpu-s12000-b128-planar_push_efm_cpu-seed3-c4"
     assert pe.budget_tag(pe.resolve_budget(budget_args(), suite)) == "cpu-s2000-b64"  # earlier reports' names
     assert [pe.curve_step(budget, k) for k in range(1, 5)] == [3000, 6000, 9000, 12000]
@@ -113,39 +149,103 @@ def test_budget_config_seed_and_curve_name_the_runs():
 
 def test_curve_table_lists_each_checkpoint_with_its_minutes():
     suite = pe.SUITES["planar_push"]
-    curve = [{"step": 6000, "train_min": 15.2, "pc_success": 46.0}, {"step": 12000, "train_min": 30.4, "pc_success": 64.0}]
+    curve = [
+        {"step": 6000, "train_min": 15.2, "pc_success": 46.0},
+        {"step": 12000, "train_min": 30.4, "pc_success": 64.0},
+    ]
     cells = {("ac", "expert"): {"curve": curve, "steps_per_s": 6.75}, ("gc", "expert"): {"curve": curve[-1:]}}
     lines = pe.curve_table(suite, ["gc", "ac"], ["expert"], cells).splitlines()
     assert lines[0] == "| dataset | agent | step 6000 | step 12000 | steps/s |"
-    assert lines[2:] == ["| Expert | FM-AC no-RL | 46 (15 min) | 64 (30 min) | 6.75 |"]  # single points: no curve
+    assert lines[2:] == [
+        "| Expert | FM-AC no-RL | 46 (15 min) | 64 (30 min) | 6.75 |"
+    ]  # single points: no curve
 
 
-@pytest.mark.parametrize("config, expected", [
-    ("ogbench_pointmaze_efm.json", dict(obs_traj_len=4, obs_traj_stride=16, action_traj_len=8, action_traj_stride=1,
-                                        max_goal_distance=200, action_mode="velocity", ema_cutoff=5000)),
-    ("planar_push_efm.json", dict(obs_traj_len=3, obs_traj_stride=10, action_traj_len=8, action_traj_stride=1,
-                                  max_goal_distance=600, action_mode="absolute", ema_cutoff=1000)),
-])
+@pytest.mark.parametrize(
+    "config, expected",
+    [
+        (
+            "ogbench_pointmaze_efm.json",
+            dict(
+                obs_traj_len=4,
+                obs_traj_stride=16,
+                action_traj_len=8,
+                action_traj_stride=1,
+                max_goal_distance=200,
+                action_mode="velocity",
+                ema_cutoff=5000,
+            ),
+        ),
+        (
+            "planar_push_efm.json",
+            dict(
+                obs_traj_len=3,
+                obs_traj_stride=10,
+                action_traj_len=8,
+                action_traj_stride=1,
+                max_goal_distance=600,
+                action_mode="absolute",
+                ema_cutoff=1000,
+            ),
+        ),
+    ],
+)
 def test_configs_hold_the_paper_hyper_parameters(config, expected):
     cfg = json.loads((REPO / "train_configs" / config).read_text())
     policy = cfg["policy"]
     assert {k: policy[k] for k in expected} == expected
-    assert (policy["optimizer_lr"], policy["optimizer_weight_decay"], policy["device"]) == (1e-4, 1e-6, "cuda")
+    assert (policy["optimizer_lr"], policy["optimizer_weight_decay"], policy["device"]) == (
+        1e-4,
+        1e-6,
+        "cuda",
+    )
     assert (cfg["steps"], cfg["batch_size"]) == (200_000, 128)
 
 
-TINY_TRAIN = ["--policy.mlp_hidden_dims=[32,32]", "--policy.unet_down_dims=[8,16,16]", "--policy.unet_n_groups=4",
-              "--policy.num_inference_steps=3"]
+TINY_TRAIN = [
+    "--policy.mlp_hidden_dims=[32,32]",
+    "--policy.unet_down_dims=[8,16,16]",
+    "--policy.unet_n_groups=4",
+    "--policy.num_inference_steps=3",
+]
 
 
 def test_tiny_end_to_end_run_and_resume(tmp_path):
     """2 agents x 1 generated OGBench dataset, 20 training steps, 5 eval episodes (one per task) of 60 steps."""
     out = tmp_path / "report.md"
-    argv = ["--suite", "ogbench", "--datasets", "pointmaze-large-navigate-v0", "--variants", "gc", "ac_rl",
-            "--steps", "20", "--batch-size", "16", "--eval-episodes", "5", "--eval-batch-size", "5",
-            "--ogbench-episodes", "10", "--ogbench-episode-steps", "101", "--jobs", "2", "--curve-points", "2",
-            "--work-dir", str(tmp_path / "work"), "--data-root", str(tmp_path / "data"), "--out", str(out),
-            *[f"--train-arg={a}" for a in TINY_TRAIN], "--eval-arg=--env.episode_length=60"]
+    argv = [
+        "--suite",
+        "ogbench",
+        "--datasets",
+        "pointmaze-large-navigate-v0",
+        "--variants",
+        "gc",
+        "ac_rl",
+        "--steps",
+        "20",
+        "--batch-size",
+        "16",
+        "--eval-episodes",
+        "5",
+        "--eval-batch-size",
+        "5",
+        "--ogbench-episodes",
+        "10",
+        "--ogbench-episode-steps",
+        "101",
+        "--jobs",
+        "2",
+        "--curve-points",
+        "2",
+        "--work-dir",
+        str(tmp_path / "work"),
+        "--data-root",
+        str(tmp_path / "data"),
+        "--out",
+        str(out),
+        *[f"--train-arg={a}" for a in TINY_TRAIN],
+        "--eval-arg=--env.episode_length=60",
+    ]
     assert pe.main(argv) == 0
 
     report = json.loads(out.with_suffix(".json").read_text())
@@ -162,11 +262,24 @@ def test_tiny_end_to_end_run_and_resume(tmp_path):
         assert cell["paper"] == pe.SUITES["ogbench"].paper[v]["pointmaze-large-navigate-v0"]
         saved = json.loads(next((tmp_path / "work").glob(f"ogbench/*/*/{v}/result.json")).read_text())
         # the checkpoint really is the trained agent, with the suite's hyper-parameters
-        ckpt = json.loads(next((tmp_path / "work").glob(f"ogbench/*/*/{v}/train/checkpoints/last/pretrained_model/config.json")).read_text())
-        assert (ckpt["type"], ckpt["use_rl"], ckpt["obs_traj_stride"], ckpt["action_mode"]) == (policy_type, rl == "true", 16, "velocity")
+        ckpt = json.loads(
+            next(
+                (tmp_path / "work").glob(
+                    f"ogbench/*/*/{v}/train/checkpoints/last/pretrained_model/config.json"
+                )
+            ).read_text()
+        )
+        assert (ckpt["type"], ckpt["use_rl"], ckpt["obs_traj_stride"], ckpt["action_mode"]) == (
+            policy_type,
+            rl == "true",
+            16,
+            "velocity",
+        )
         assert saved["pc_success"] == cell["pc_success"]
         # the learning curve: the step-10 checkpoint evaluated too, the last point is the cell's result
-        assert [p["step"] for p in cell["curve"]] == [10, 20] and cell["curve"][-1]["pc_success"] == cell["pc_success"]
+        assert [p["step"] for p in cell["curve"]] == [10, 20] and cell["curve"][-1]["pc_success"] == cell[
+            "pc_success"
+        ]
         assert 0 < cell["curve"][0]["train_min"] < cell["curve"][1]["train_min"] and cell["steps_per_s"] > 0
     md = out.read_text()
     assert "**Budget: 20 training steps at batch 16 on `cpu`**" in md
@@ -177,35 +290,66 @@ def test_tiny_end_to_end_run_and_resume(tmp_path):
     assert pe.main(argv) == 0
     assert time.perf_counter() - start < 5
     assert all(c.get("cached") for c in json.loads(out.with_suffix(".json").read_text())["cells"])
-    assert "generated by `python -m lerobot_efm.ogbench.generate --dataset pointmaze-large-navigate-v0" in out.read_text()
+    assert (
+        "generated by `python -m lerobot_efm.ogbench.generate --dataset pointmaze-large-navigate-v0"
+        in out.read_text()
+    )
 
     # --cached-only reports the finished cells of a wider selection and runs nothing for the others
     wider = [a if a != "ac_rl" else "ac_rl pc" for a in argv] + ["--cached-only"]
     assert pe.main(wider) == 0
-    assert {c["variant"] for c in json.loads(out.with_suffix(".json").read_text())["cells"]} == {"gc", "ac_rl"}
-    assert "| FM-PC no-RL | – | 60 |" in out.read_text() and not list((tmp_path / "work").glob("ogbench/*/*/pc"))
+    assert {c["variant"] for c in json.loads(out.with_suffix(".json").read_text())["cells"]} == {
+        "gc",
+        "ac_rl",
+    }
+    assert "| FM-PC no-RL | – | 60 |" in out.read_text() and not list(
+        (tmp_path / "work").glob("ogbench/*/*/pc")
+    )
 
     # another checkout (no work dir, no datasets) reports those cells from the committed JSON with --import-report
     committed = tmp_path / "committed.json"
     shutil.copy(out.with_suffix(".json"), committed)
-    elsewhere = [a.replace(str(tmp_path / "work"), str(tmp_path / "fresh_work"))
-                  .replace(str(tmp_path / "data"), str(tmp_path / "fresh_data")) for a in argv]
+    elsewhere = [
+        a.replace(str(tmp_path / "work"), str(tmp_path / "fresh_work")).replace(
+            str(tmp_path / "data"), str(tmp_path / "fresh_data")
+        )
+        for a in argv
+    ]
     assert pe.main([*elsewhere, "--cached-only", "--import-report", str(committed)]) == 0
     reported = json.loads(out.with_suffix(".json").read_text())
-    assert {c["variant"]: c["pc_success"] for c in reported["cells"]} == {v: c["pc_success"] for v, c in cells.items()}
-    assert "generated by `python -m lerobot_efm.ogbench.generate" in out.read_text()  # provenance from the report
+    assert {c["variant"]: c["pc_success"] for c in reported["cells"]} == {
+        v: c["pc_success"] for v, c in cells.items()
+    }
+    assert (
+        "generated by `python -m lerobot_efm.ogbench.generate" in out.read_text()
+    )  # provenance from the report
     with pytest.raises(ValueError, match="committed.json.*budget"):  # another budget's cells never mix in
         pe.main([*[a if a != "20" else "40" for a in elsewhere], "--import-report", str(committed)])
 
 
 def test_plot_learning_curves_draws_cells_with_curves(tmp_path):
-    spec = importlib.util.spec_from_file_location("plot_learning_curves", REPO / "benchmarks" / "plot_learning_curves.py")
+    spec = importlib.util.spec_from_file_location(
+        "plot_learning_curves", REPO / "benchmarks" / "plot_learning_curves.py"
+    )
     plot = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(plot)
-    curve = [{"step": 10, "train_min": 1.0, "pc_success": 20.0}, {"step": 20, "train_min": 2.0, "pc_success": 40.0}]
+    curve = [
+        {"step": 10, "train_min": 1.0, "pc_success": 20.0},
+        {"step": 20, "train_min": 2.0, "pc_success": 40.0},
+    ]
     report = tmp_path / "r.json"
-    report.write_text(json.dumps({"budget": {"seed": 3}, "config": "train_configs/x_cpu.json", "cells": [
-        {"agent": "FM-AC no-RL", "dataset": "expert", "curve": curve}, {"agent": "FM-GC", "dataset": "full"}]}))
+    report.write_text(
+        json.dumps(
+            {
+                "budget": {"seed": 3},
+                "config": "train_configs/x_cpu.json",
+                "cells": [
+                    {"agent": "FM-AC no-RL", "dataset": "expert", "curve": curve},
+                    {"agent": "FM-GC", "dataset": "full"},
+                ],
+            }
+        )
+    )
     cells = plot.load_cells([report])
     assert [(c["agent"], c["seed"], c["config_name"]) for c in cells] == [("FM-AC no-RL", 3, "x_cpu")]
     plot.main([str(report), "--out", str(tmp_path / "c.png")])

@@ -3,16 +3,33 @@
 import gymnasium as gym
 import numpy as np
 import pytest
-
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env
 from lerobot.envs.utils import preprocess_observation
+
 from lerobot_efm.envs import PlanarPushEnv, PlanarPushEnvConfig
 from lerobot_efm.envs.planar_push.demonstrators import (
-    BEHAVIOURS, CORNER_SLIDE, CORNERS, CURSOR_REACH, PLAY_REST, REGION_OVERLAP, STALL_FRAMES, VIA_TOL, ExpertReachGoal,
-    Leg, PlayFullSpace, PlayPartitioned, Pusher, disc_coverage, evaluate_expert, main, parse_options, record_planar_push_dataset,
-    WALL_SLIDE_TO, run_episode,
+    BEHAVIOURS,
+    CORNER_SLIDE,
+    CORNERS,
+    CURSOR_REACH,
+    PLAY_REST,
+    REGION_OVERLAP,
+    STALL_FRAMES,
+    VIA_TOL,
+    WALL_SLIDE_TO,
+    ExpertReachGoal,
+    Leg,
+    PlayFullSpace,
+    PlayPartitioned,
+    Pusher,
+    disc_coverage,
+    evaluate_expert,
+    main,
+    parse_options,
+    record_planar_push_dataset,
+    run_episode,
 )
 from lerobot_efm.envs.planar_push.env import EVAL_PAIRS, FPS, GYM_ID, SUCCESS_TOL, TASK_NAMES
 from lerobot_efm.envs.planar_push.maze import CELL, CORNER, inside_region, region_of, wall_distance
@@ -58,7 +75,9 @@ def test_disc_friction_is_isotropic(env, deg):
         if moved is None:
             assert np.linalg.norm(disc) < 0.01, disc
         else:
-            assert np.linalg.norm(disc) > moved and abs(np.degrees(np.arctan2(disc[1], disc[0])) - deg) < 2.0, disc
+            assert (
+                np.linalg.norm(disc) > moved and abs(np.degrees(np.arctan2(disc[1], disc[0])) - deg) < 2.0
+            ), disc
 
 
 def test_walls_block_effector_and_disc(env):
@@ -176,19 +195,36 @@ def test_commands_trail_the_effector_like_a_cursor(env, behaviour):
     assert lead.max() < CURSOR_REACH + 0.05, lead.max()  # noise: 0.01 per axis in play
     far = cls(env, np.random.default_rng(2), cursor_reach=None)
     states, actions, _, _ = run_episode(env, far, 600)
-    assert np.linalg.norm(actions - states[:, :2], axis=1).max() > CURSOR_REACH + 0.08  # the option turns it off
+    assert (
+        np.linalg.norm(actions - states[:, :2], axis=1).max() > CURSOR_REACH + 0.08
+    )  # the option turns it off
 
 
 def test_recorder_options_reach_the_operator(tmp_path):
     assert parse_options(PlayPartitioned, ["noise=0.003", "cursor_reach=none", "region=2"]) == {
-        "noise": 0.003, "cursor_reach": None, "region": 2}
+        "noise": 0.003,
+        "cursor_reach": None,
+        "region": 2,
+    }
     with pytest.raises(ValueError, match="'nois=1'.*noise"):
         parse_options(PlayFullSpace, ["nois=1"])
     with pytest.raises(ValueError, match="'abc' is not a number"):
         parse_options(PlayFullSpace, ["noise=abc"])
-    main(["--behaviour", "partitioned", "--root", str(tmp_path / "pp"), "--frames", "50", "--option", "region=1"])
-    states = np.stack(LeRobotDataset("local/planar_push_partitioned", root=tmp_path / "pp").hf_dataset[
-        "observation.state"])
+    main(
+        [
+            "--behaviour",
+            "partitioned",
+            "--root",
+            str(tmp_path / "pp"),
+            "--frames",
+            "50",
+            "--option",
+            "region=1",
+        ]
+    )
+    states = np.stack(
+        LeRobotDataset("local/planar_push_partitioned", root=tmp_path / "pp").hf_dataset["observation.state"]
+    )
     assert inside_region(states[:, 2:], 1, -REGION_OVERLAP - 0.03).all()
 
 
@@ -222,12 +258,16 @@ def test_expert_slides_into_its_corner_and_leaves_the_hand_behind_the_disc():
     wall (a straight push at the corner leaves the hand on the diagonal, off every corner goal)."""
     env = PlanarPushEnv(task="all")
     op = ExpertReachGoal(env, np.random.default_rng(0), corner_share=1.0)
-    hand_gap = EVAL_PAIRS[0][2][3] - EVAL_PAIRS[0][2][0]  # corner goal: hand this far from the disc, on a wall
+    hand_gap = (
+        EVAL_PAIRS[0][2][3] - EVAL_PAIRS[0][2][0]
+    )  # corner goal: hand this far from the disc, on a wall
     goals = np.array([[*(c - hand_gap * np.sign(c) * axis), *c] for c in CORNERS for axis in np.eye(2)])
     finals = [states[-1] for states, _, _, done in (run_episode(env, op, 600) for _ in range(8)) if done]
     env.close()
-    on_goal = [bool((np.linalg.norm((goals - s).reshape(-1, 2, 2), axis=-1) < SUCCESS_TOL).all(axis=1).any())
-               for s in finals]
+    on_goal = [
+        bool((np.linalg.norm((goals - s).reshape(-1, 2, 2), axis=-1) < SUCCESS_TOL).all(axis=1).any())
+        for s in finals
+    ]
     assert len(finals) >= 3 and np.mean(on_goal) >= 0.75, on_goal
 
 
@@ -310,21 +350,30 @@ def test_play_slides_the_disc_into_a_corner_along_a_wall(env, pair):
     fixed where the slide starts, leaving the hand behind it where the corner evaluation goals have it. Re-aiming
     at the corner at every step (or pushing straight at it) leaves the hand off that line, out of tolerance."""
     _, _, goal = EVAL_PAIRS[pair]
-    along_wall = (goal[:2] - goal[2:]) / np.linalg.norm(goal[:2] - goal[2:])  # the goal's hand is behind the disc
+    along_wall = (goal[:2] - goal[2:]) / np.linalg.norm(
+        goal[:2] - goal[2:]
+    )  # the goal's hand is behind the disc
     via = Pusher().corner_via(goal[2:], np.random.default_rng(0))
-    assert via is not None and np.isclose(np.abs(via - goal[2:]).min(), 0.0)  # on one of the corner's walls' lines
+    assert via is not None and np.isclose(
+        np.abs(via - goal[2:]).min(), 0.0
+    )  # on one of the corner's walls' lines
     inward = -np.sign(goal[2:]) * (1.0 - np.abs(along_wall))  # away from the wall, towards the room
     disc = goal[2:] + along_wall * CORNER_SLIDE + inward * 0.75 * VIA_TOL  # where a via leg may stop it
     env.reset(options={"initial": [*(disc + along_wall * 0.32), *disc]})
     op = PlayFullSpace(env, np.random.default_rng(pair))
-    op._budget, op._queue = op.leg_budget, [Leg("disc_stop", goal[2:].copy(), slide=True), Leg("pause", frames=30)]
+    op._budget, op._queue = (
+        op.leg_budget,
+        [Leg("disc_stop", goal[2:].copy(), slide=True), Leg("pause", frames=30)],
+    )
     obs = env.observe()
     for _ in range(400):
         obs, *_ = env.step(op.act(obs))
         if op._queue[0].kind == "pause" and op._queue[0].frames < 20:
             break
     s = obs["agent_pos"]
-    assert np.linalg.norm(s[2:] - goal[2:]) < SUCCESS_TOL and np.linalg.norm(s[:2] - goal[:2]) < SUCCESS_TOL, s
+    assert (
+        np.linalg.norm(s[2:] - goal[2:]) < SUCCESS_TOL and np.linalg.norm(s[:2] - goal[:2]) < SUCCESS_TOL
+    ), s
 
 
 @pytest.mark.parametrize("region", [0, 1, 2])
@@ -393,8 +442,13 @@ def _slide_frames(states: np.ndarray) -> int:
         for wall_axis in (0, 1):
             along = 1 - wall_axis
             gap = corner[along] - obj[:, along]
-            count += int(((np.abs(obj[:, wall_axis] - corner[wall_axis]) < 0.03) & (np.abs(gap) < 0.7)
-                          & (step[:, along] * np.sign(gap) > 0.002)).sum())
+            count += int(
+                (
+                    (np.abs(obj[:, wall_axis] - corner[wall_axis]) < 0.03)
+                    & (np.abs(gap) < 0.7)
+                    & (step[:, along] * np.sign(gap) > 0.002)
+                ).sum()
+            )
     return count
 
 
@@ -402,6 +456,7 @@ def test_play_slides_along_walls_towards_corners_and_stops_short(env):
     """``wall_slides``: wall legs that slide the disc along a wall towards a corner (the final approach to the corner
     goals, otherwise shown once per episode at most) and stop where the hand still fits in front of the corner,
     so that play goes on: many more slide frames, the disc never wedged, and it leaves the corner again."""
+
     def play(wall_slides):
         slides, left, wedged = 0, 0, 0
         for seed in range(3):
@@ -411,7 +466,7 @@ def test_play_slides_along_walls_towards_corners_and_stops_short(env):
             to_corner = np.linalg.norm(states[:, None, 2:] - CORNERS[None], axis=-1).min(axis=1)
             wedged += int((to_corner < 0.05).sum())  # as far in as a corner goal
             stopped = np.flatnonzero(to_corner < WALL_SLIDE_TO[1] + 0.02)
-            left += int(len(stopped) > 0 and (to_corner[stopped[-1]:] > 0.5).any())
+            left += int(len(stopped) > 0 and (to_corner[stopped[-1] :] > 0.5).any())
         return slides, left, wedged
 
     base, _, _ = play(0.0)

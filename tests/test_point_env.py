@@ -4,13 +4,19 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env, make_env_config
 from lerobot.envs.utils import env_to_policy_features, preprocess_observation
+
 from lerobot_efm.envs import POINT_REACH_GYM_ID, PointReachEnv, PointReachEnvConfig
 from lerobot_efm.envs.point_reach import (
-    MAX_STEP, TASKS, WALL_HALF_WIDTH, WALL_TOP, in_wall, move_point, render_scene,
+    MAX_STEP,
+    TASKS,
+    WALL_HALF_WIDTH,
+    WALL_TOP,
+    in_wall,
+    move_point,
+    render_scene,
 )
 
 
@@ -60,8 +66,12 @@ def test_factory_pixel_keys_and_goal_image():
     try:
         obs, _ = vec.reset(seed=[3, 4], options={"start": [0.5, 0.5], "goal": [0.5, 0.5]})
         batch = _policy_obs(cfg, vec, obs)
-        assert set(batch) == {"observation.state", "observation.goal.state",
-                              "observation.images.top", "observation.goal.images.top"}
+        assert set(batch) == {
+            "observation.state",
+            "observation.goal.state",
+            "observation.images.top",
+            "observation.goal.images.top",
+        }
         img, goal_img = batch["observation.images.top"], batch["observation.goal.images.top"]
         assert img.shape == goal_img.shape == (2, 3, 32, 32) and goal_img.dtype == torch.float32
         assert 0.0 <= float(goal_img.min()) and float(goal_img.max()) <= 1.0

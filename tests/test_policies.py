@@ -6,9 +6,9 @@ import math
 import pytest
 import torch
 from conftest import EFM_TYPES, tiny_config
+from lerobot.policies.factory import get_policy_class, make_policy, make_pre_post_processors
 from torch.utils.data import DataLoader
 
-from lerobot.policies.factory import get_policy_class, make_policy, make_pre_post_processors
 from lerobot_efm.hindsight import HindsightGoalDataset
 from lerobot_efm.modeling_efm import _to_control_rate
 
@@ -25,7 +25,12 @@ def build(dataset, policy_type, **overrides):
 
 
 def inference_inputs(batch, n=2):
-    keep = ("observation.state", "observation.images.top", "observation.goal.state", "observation.goal.images.top")
+    keep = (
+        "observation.state",
+        "observation.images.top",
+        "observation.goal.state",
+        "observation.goal.images.top",
+    )
     return {k: v[:n] for k, v in batch.items() if k in keep}
 
 
@@ -33,11 +38,18 @@ def inference_inputs(batch, n=2):
 def test_forward_backward_update_and_act(state_dataset, policy_type, use_rl):
     # An MLP state encoder, so that the encoder has weights whose gradients can be checked (the default
     # identity encoder has none).
-    policy, _, post, batch = build(state_dataset, policy_type, use_rl=use_rl, state_encoder="mlp", state_latent_dim=8)
+    policy, _, post, batch = build(
+        state_dataset, policy_type, use_rl=use_rl, state_encoder="mlp", state_latent_dim=8
+    )
     loss, info = policy.forward(batch)
     assert loss.dim() == 0 and math.isfinite(loss.item())
-    components = {"efm_gc": {"actor"}, "efm_ac": {"critic", "actor"}, "efm_pc": {"critic", "planner", "actor"},
-                  "efm_ps": {"critic", "planner", "actor"}, "efm_as": {"critic", "actor", "world"}}[policy_type]
+    components = {
+        "efm_gc": {"actor"},
+        "efm_ac": {"critic", "actor"},
+        "efm_pc": {"critic", "planner", "actor"},
+        "efm_ps": {"critic", "planner", "actor"},
+        "efm_as": {"critic", "actor", "world"},
+    }[policy_type]
     assert {k[5:] for k in info if k.startswith("loss_")} == components
     # rows = batch + reached (+ bootstrap rows with use_rl)
     assert info["rows"] == 6 + 4 + (6 if use_rl else 0)
@@ -103,7 +115,9 @@ def test_rejection_sampling_picks_each_rows_best_candidate(state_dataset, policy
             assert scores[b, index[b]] == scores[b].min()
     else:
         plans = pred["candidate_obs_plans"]
-        independent = torch.stack([torch.stack([score(plans[b, j, -1], b) for j in range(7)]) for b in range(4)])
+        independent = torch.stack(
+            [torch.stack([score(plans[b, j, -1], b) for j in range(7)]) for b in range(4)]
+        )
         assert torch.allclose(scores, independent, atol=1e-5)
         assert torch.equal(index, independent.argmin(1))
         assert torch.equal(pred["obs_plan"], plans[torch.arange(4), index])
@@ -123,7 +137,10 @@ def test_save_load_round_trip(state_dataset, tmp_path, policy_type):
     assert saved.keys() == restored.keys()
     for name, value in saved.items():
         assert torch.equal(value, restored[name]), name
-    assert any(not torch.equal(restored["model." + n], restored["ema_model." + n]) for n, _ in loaded.model.named_parameters())
+    assert any(
+        not torch.equal(restored["model." + n], restored["ema_model." + n])
+        for n, _ in loaded.model.named_parameters()
+    )
     obs = inference_inputs(batch)
     policy.eval()
     torch.manual_seed(3)
@@ -153,7 +170,9 @@ def test_policy_and_config_classes_as_lerobots_generic_test_reads_them(policy_ty
     policy_cls = get_policy_class(policy_type)
     config = make_policy_config(policy_type)
     assert policy_cls.name == policy_type and isinstance(config, policy_cls.config_class)
-    assert issubclass(policy_cls.config_class, inspect.signature(policy_cls.__init__).parameters["config"].annotation)
+    assert issubclass(
+        policy_cls.config_class, inspect.signature(policy_cls.__init__).parameters["config"].annotation
+    )
 
 
 def test_unbatched_robot_observation_with_goal_is_batched_by_the_preprocessor(state_dataset):
@@ -207,8 +226,18 @@ def test_action_chunk_shape_checked(state_dataset):
 
 def test_config_contract_and_validation():
     cfg = tiny_config("efm_ac")
-    for field in ["obs_traj_len", "obs_traj_stride", "action_traj_len", "action_traj_stride", "max_goal_distance",
-                  "num_inference_steps", "use_rl", "rl_goal_ratio", "num_candidates", "n_action_steps"]:
+    for field in [
+        "obs_traj_len",
+        "obs_traj_stride",
+        "action_traj_len",
+        "action_traj_stride",
+        "max_goal_distance",
+        "num_inference_steps",
+        "use_rl",
+        "rl_goal_ratio",
+        "num_candidates",
+        "n_action_steps",
+    ]:
         assert hasattr(cfg, field), field
     with pytest.raises(ValueError, match="use_rl"):
         tiny_config("efm_gc", use_rl=True)

@@ -4,19 +4,22 @@ import os
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
 from lerobot_efm.envs.point_reach import PointReachEnvConfig
 from lerobot_efm.recording import finalizing, make_raw_env, open_dataset, operator_class, record_episodes
 from lerobot_efm.synthetic import PointPlayOperator
 
 RECORD = [sys.executable, "-m", "lerobot_efm.scripts.record"]
-POINT_ARGS = ["--env.type=efm_point_reach", "--env.obs_type=pixels_state", "--env.image_size=32",
-              "--repo_id=local/rec_test"]
+POINT_ARGS = [
+    "--env.type=efm_point_reach",
+    "--env.obs_type=pixels_state",
+    "--env.image_size=32",
+    "--repo_id=local/rec_test",
+]
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
 
 
@@ -39,7 +42,9 @@ def test_cli_records_video_dataset_and_resumes(tmp_path):
 
     again = subprocess.run([*args, "--episodes=1", "--seed=4"], env=ENV, capture_output=True, text=True)
     assert again.returncode != 0 and "--resume=true" in again.stderr  # never overwrites a dataset
-    subprocess.run([*args, "--episodes=1", "--resume=true"], check=True, env=ENV, capture_output=True, timeout=300)
+    subprocess.run(
+        [*args, "--episodes=1", "--resume=true"], check=True, env=ENV, capture_output=True, timeout=300
+    )
     ds = LeRobotDataset("local/rec_test", root=root)
     assert ds.num_episodes == 3 and ds.num_frames == 90
     assert ds[89]["observation.images.top"].shape == (3, 32, 32)
@@ -48,8 +53,12 @@ def test_cli_records_video_dataset_and_resumes(tmp_path):
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_interrupt_keeps_saved_episodes(tmp_path, sig):
     root = tmp_path / "ds"
-    proc = subprocess.Popen([*RECORD, *POINT_ARGS, f"--root={root}", "--episodes=1000", "--episode_length=40"],
-                            env=ENV, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [*RECORD, *POINT_ARGS, f"--root={root}", "--episodes=1000", "--episode_length=40"],
+        env=ENV,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     seen = []
     for line in proc.stderr:  # wait until two episodes are saved, then interrupt mid-recording
         seen.append(line)
@@ -82,8 +91,10 @@ class _CrashOnce:
         return self.inner.act(obs)
 
 
-POINT_FEATURES = {"observation.state": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]},
-                  "action": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]}}
+POINT_FEATURES = {
+    "observation.state": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]},
+    "action": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]},
+}
 
 
 def _point_recording(root, operator_cls, repo_id):

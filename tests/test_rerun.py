@@ -35,7 +35,13 @@ def scalars(rows):
 
 def check_episode(data, i, length, n_action_steps, num_candidates=None):
     ep = f"episode_{i}"
-    for name in ("reward", "success", "action", "info/distance", "camera/render"):  # one row per env step, steps 0..length-1
+    for name in (
+        "reward",
+        "success",
+        "action",
+        "info/distance",
+        "camera/render",
+    ):  # one row per env step, steps 0..length-1
         assert [r["step"] for r in temporal(data[f"{ep}/{name}"])] == list(range(length)), name
     # observations: every step plus the final observation
     for name in ("world/agent", "obs/state", "goal_obs/state"):
@@ -73,8 +79,16 @@ def check_episode(data, i, length, n_action_steps, num_candidates=None):
 )
 def test_rollout_rrd(checkpoints, tmp_path, policy_type, limit, num_candidates):
     output = tmp_path / "rollout.rrd"
-    results = rollout.main([f"--policy.path={checkpoints[policy_type]}", "--env.type=efm_point_reach", "--n_episodes=2",
-                            f"--output={output}", "--seed=3", limit])
+    results = rollout.main(
+        [
+            f"--policy.path={checkpoints[policy_type]}",
+            "--env.type=efm_point_reach",
+            "--n_episodes=2",
+            f"--output={output}",
+            "--seed=3",
+            limit,
+        ]
+    )
     assert len(results) == 2 and output.exists()
     data = read_rrd(output)
     expected = 25 if "episode_length" in limit else 20  # untrained policies do not reach the goal
@@ -83,7 +97,9 @@ def test_rollout_rrd(checkpoints, tmp_path, policy_type, limit, num_candidates):
         check_episode(data, i, res["length"], n_action_steps=6, num_candidates=num_candidates)
     assert "scene/wall" in data and "scene/arena" in data
     reader = RrdReader(output)
-    assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1  # the default layout travels with it
+    assert (
+        len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
+    )  # the default layout travels with it
 
 
 def test_success_backfills_true_remaining_steps(tmp_path):
@@ -95,8 +111,15 @@ def test_success_backfills_true_remaining_steps(tmp_path):
     log.begin_episode(0)
     img = torch.rand(1, 3, 8, 8)
     for t in range(5):
-        log.log_observation(t, {"observation.state": torch.tensor([[0.1 * t, 0.2]]), "observation.goal.state": torch.tensor([[0.5, 0.2]]),
-                                "observation.images.top": img, "observation.goal.images.top": img})
+        log.log_observation(
+            t,
+            {
+                "observation.state": torch.tensor([[0.1 * t, 0.2]]),
+                "observation.goal.state": torch.tensor([[0.5, 0.2]]),
+                "observation.images.top": img,
+                "observation.goal.images.top": img,
+            },
+        )
         if t == 0:
             log.log_prediction(t, {"distance": torch.tensor([5.0])})
         log.log_action(t, np.array([0.1 * (t + 1), 0.2]))
@@ -119,20 +142,36 @@ def test_success_backfills_true_remaining_steps(tmp_path):
 @pytest.mark.parametrize("policy_type", ["efm_ps", "efm_ac"])
 def test_log_dataset_rrd(state_dataset, state_dataset_root, tmp_path, policy_type):
     output = tmp_path / "samples.rrd"
-    logged = log_dataset.main([f"--repo_id={REPO_ID}", f"--root={state_dataset_root}", f"--policy.type={policy_type}",
-                               "--policy.device=cpu", "--policy.max_goal_distance=40", "--policy.obs_traj_stride=4",
-                               "--num_samples=5", "--seed=1", f"--output={output}"])
+    logged = log_dataset.main(
+        [
+            f"--repo_id={REPO_ID}",
+            f"--root={state_dataset_root}",
+            f"--policy.type={policy_type}",
+            "--policy.device=cpu",
+            "--policy.max_goal_distance=40",
+            "--policy.obs_traj_stride=4",
+            "--num_samples=5",
+            "--seed=1",
+            f"--output={output}",
+        ]
+    )
     assert len(logged) == 5
     data = read_rrd(output)
     states = np.array(state_dataset.hf_dataset["observation.state"], dtype=np.float32)
     actions = np.array(state_dataset.hf_dataset["action"], dtype=np.float32)
-    assert [r["Scalars:scalars"][0] for r in temporal(data["summary/d"], "sample")] == [s["d"] for s in logged]
+    assert [r["Scalars:scalars"][0] for r in temporal(data["summary/d"], "sample")] == [
+        s["d"] for s in logged
+    ]
     for s in logged:
         root, k, d = f"sample_{s['sample']}", s["row"], int(s["d"])
         assert 0 <= d <= 40
         assert data[f"{root}/d"][0]["Scalars:scalars"] == [float(d)]
-        np.testing.assert_allclose(data[f"{root}/world/obs"][0]["Points3D:positions"][0][:2], states[k], atol=1e-6)
-        np.testing.assert_allclose(data[f"{root}/world/goal"][0]["Points3D:positions"][0][:2], states[k + d], atol=1e-6)
+        np.testing.assert_allclose(
+            data[f"{root}/world/obs"][0]["Points3D:positions"][0][:2], states[k], atol=1e-6
+        )
+        np.testing.assert_allclose(
+            data[f"{root}/world/goal"][0]["Points3D:positions"][0][:2], states[k + d], atol=1e-6
+        )
         strip = np.array(data[f"{root}/world/action_traj"][0]["LineStrips3D:strips"][0])
         assert strip.shape == (8, 3)  # L_a = 8, S_a = 1, held at the goal
         np.testing.assert_allclose(strip[:, :2], actions[[k + min(j, d) for j in range(8)]], atol=1e-6)
@@ -146,8 +185,18 @@ def test_log_dataset_rrd(state_dataset, state_dataset_root, tmp_path, policy_typ
 
 def test_log_dataset_with_video(video_dataset_root, tmp_path):
     output = tmp_path / "video_samples.rrd"
-    log_dataset.main([f"--repo_id={REPO_ID}", f"--root={video_dataset_root}", "--policy.type=efm_pc", "--policy.device=cpu",
-                      "--policy.max_goal_distance=20", "--policy.obs_traj_stride=4", "--num_samples=2", f"--output={output}"])
+    log_dataset.main(
+        [
+            f"--repo_id={REPO_ID}",
+            f"--root={video_dataset_root}",
+            "--policy.type=efm_pc",
+            "--policy.device=cpu",
+            "--policy.max_goal_distance=20",
+            "--policy.obs_traj_stride=4",
+            "--num_samples=2",
+            f"--output={output}",
+        ]
+    )
     data = read_rrd(output)
     for n in range(2):
         for path in ("images/top", "goal_images/top", "traj_images/top/0", "traj_images/top/2"):
@@ -168,9 +217,11 @@ def talos_bounds_stats() -> dict[str, dict[str, np.ndarray]]:
     pose_hi = np.concatenate([WORKSPACE_HIGH, np.ones(6), [1.0]]).astype(np.float32)
     env_lo = np.concatenate([[-2.0, -0.28], WORKSPACE_LOW, -np.ones(4)]).astype(np.float32)
     env_hi = np.concatenate([[0.0, 0.0], WORKSPACE_HIGH, np.ones(4)]).astype(np.float32)
-    return {"observation.state": {"min": np.tile(pose_lo, 2), "max": np.tile(pose_hi, 2)},
-            "observation.environment_state": {"min": env_lo, "max": env_hi},
-            "action": {"min": pose_lo, "max": pose_hi}}
+    return {
+        "observation.state": {"min": np.tile(pose_lo, 2), "max": np.tile(pose_hi, 2)},
+        "observation.environment_state": {"min": env_lo, "max": env_hi},
+        "action": {"min": pose_lo, "max": pose_hi},
+    }
 
 
 @pytest.fixture(scope="module")
@@ -192,16 +243,29 @@ def test_talos_hand_slices_follow_the_state_names():
     viz = get_env_viz("talos_kitchen")
     state = np.arange(len(STATE_NAMES), dtype=np.float32)
     points = viz.state_points(state)
-    np.testing.assert_array_equal(points["hand_commanded"], [STATE_NAMES.index(n) for n in ("cmd_x", "cmd_y", "cmd_z")])
+    np.testing.assert_array_equal(
+        points["hand_commanded"], [STATE_NAMES.index(n) for n in ("cmd_x", "cmd_y", "cmd_z")]
+    )
     np.testing.assert_array_equal(points["hand_measured"], [STATE_NAMES.index(n) for n in ("x", "y", "z")])
-    np.testing.assert_array_equal(viz.action_points(np.arange(20.0).reshape(2, 10)), [[0, 1, 2], [10, 11, 12]])
+    np.testing.assert_array_equal(
+        viz.action_points(np.arange(20.0).reshape(2, 10)), [[0, 1, 2], [10, 11, 12]]
+    )
 
 
 def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
     """lerobot-efm-rollout in the MuJoCo Talos kitchen: hand trajectories, predicted chunks and object states."""
     output, length = tmp_path / "talos.rrd", 12
-    results = rollout.main([f"--policy.path={talos_checkpoint}", "--env.type=talos_kitchen", "--env.task=open_door",
-                            "--env.image_size=32", f"--env.episode_length={length}", "--n_episodes=1", f"--output={output}"])
+    results = rollout.main(
+        [
+            f"--policy.path={talos_checkpoint}",
+            "--env.type=talos_kitchen",
+            "--env.task=open_door",
+            "--env.image_size=32",
+            f"--env.episode_length={length}",
+            "--n_episodes=1",
+            f"--output={output}",
+        ]
+    )
     assert [r["length"] for r in results] == [length]
     data = read_rrd(output)
     ep, steps = "episode_0", list(range(length + 1))  # every step plus the final observation
@@ -213,7 +277,10 @@ def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
         assert points.shape == (length + 1, 3) and np.isfinite(points).all(), name
         paths[name] = points
         assert len(temporal(data[f"{ep}/world/goal_{name}"])) == length + 1
-        assert np.array(temporal(data[f"{ep}/world/{name}_path"])[-1]["LineStrips3D:strips"][0]).shape == (length + 1, 3)
+        assert np.array(temporal(data[f"{ep}/world/{name}_path"])[-1]["LineStrips3D:strips"][0]).shape == (
+            length + 1,
+            3,
+        )
     # the points are the state's positions (not zero-padded slices of something else): the hand is above the
     # floor near the robot, the pot on the table (z 0.85 m), the hand moves (an untrained policy commands poses)
     assert (paths["hand_measured"][:, 2] > 0.5).all() and (paths["hand_commanded"][:, 2] > 0.5).all()
@@ -223,7 +290,9 @@ def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
     assert [r["step"] for r in chunks] == list(range(0, length, 6))  # n_action_steps = 6
     for row in chunks:
         strip = np.array(row["LineStrips3D:strips"][0], dtype=np.float64)
-        assert strip.shape == (8, 3) and np.isfinite(strip).all()  # L_a waypoints of the hand position command
+        assert (
+            strip.shape == (8, 3) and np.isfinite(strip).all()
+        )  # L_a waypoints of the hand position command
     for name in ("door", "tray", "pot_x", "pot_y", "pot_z"):
         assert [r["step"] for r in temporal(data[f"{ep}/objects/{name}"])] == steps, name
         assert len(temporal(data[f"{ep}/objects/goal_{name}"])) == length + 1

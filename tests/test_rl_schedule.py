@@ -4,9 +4,9 @@ their number to the batch size over ``rl_ramp_steps``; the defaults (0, 0) are t
 import pytest
 import torch
 from conftest import tiny_config
+from lerobot.policies.factory import make_policy, make_pre_post_processors
 from torch.utils.data import DataLoader
 
-from lerobot.policies.factory import make_policy, make_pre_post_processors
 from lerobot_efm.hindsight import HindsightGoalDataset
 
 
@@ -21,7 +21,9 @@ def _policy_and_batch(dataset, **overrides):
 def test_schedule_counts():
     from lerobot_efm.agents import make_agent
 
-    model = make_agent(_with_features(tiny_config("efm_ac", use_rl=True, rl_warmup_steps=10, rl_ramp_steps=4)))
+    model = make_agent(
+        _with_features(tiny_config("efm_ac", use_rl=True, rl_warmup_steps=10, rl_ramp_steps=4))
+    )
     counts = [model.num_bootstrap_rows(8, s) for s in (0, 9, 10, 11, 12, 13, 14, 100)]
     assert counts == [0, 0, 2, 4, 6, 8, 8, 8]
     assert model.num_bootstrap_rows(8, None) == 8  # outside a training loop: fully on
@@ -48,7 +50,13 @@ def test_policy_forward_follows_the_update_counter(state_dataset):
         rows.append((info["rows"], info["rl_rows"], "rl_target_distance" in info))
         policy.update()
     base = 8 + 4  # batch + reached rows (tiny config: reached_augment_size=4)
-    assert rows == [(base, 0, False), (base, 0, False), (base + 4, 4, True), (base + 8, 8, True), (base + 8, 8, True)]
+    assert rows == [
+        (base, 0, False),
+        (base, 0, False),
+        (base + 4, 4, True),
+        (base + 8, 8, True),
+        (base + 8, 8, True),
+    ]
 
 
 def test_invalid_schedule_is_rejected():

@@ -4,11 +4,11 @@ lerobot-rollout drives the simulated robot with the goal (a hardware-free dry ru
 
 import numpy as np
 import pytest
-from test_lerobot_cli import TINY_FLAGS, run
-
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.robots.utils import make_robot_from_config
 from lerobot.teleoperators.utils import make_teleoperator_from_config
+from test_lerobot_cli import TINY_FLAGS, run
+
 from lerobot_efm.robots import ScriptedPlanarPushConfig, SimPlanarPushConfig
 from lerobot_efm.robots.sim_planar_push import ACTION_NAMES, STATE_NAMES
 
@@ -41,24 +41,63 @@ def test_sim_robot_follows_commands_and_the_scripted_teleop_plays():
 
 def test_record_train_goal_rollout_with_lerobots_clis(tmp_path):
     data, ckpt_dir, goal = tmp_path / "play", tmp_path / "train", tmp_path / "goal.safetensors"
-    run("lerobot-record", "--robot.type=efm_sim_planar_push", "--robot.id=sim", "--robot.image_size=32",
-        "--teleop.type=efm_scripted_planar_push", "--teleop.robot_id=sim", "--dataset.repo_id=local/sim_play",
-        f"--dataset.root={data}", "--dataset.single_task=play", "--dataset.fps=20", "--dataset.num_episodes=2",
-        "--dataset.episode_time_s=2", "--dataset.reset_time_s=0", "--dataset.push_to_hub=false",
-        "--play_sounds=false")
+    run(
+        "lerobot-record",
+        "--robot.type=efm_sim_planar_push",
+        "--robot.id=sim",
+        "--robot.image_size=32",
+        "--teleop.type=efm_scripted_planar_push",
+        "--teleop.robot_id=sim",
+        "--dataset.repo_id=local/sim_play",
+        f"--dataset.root={data}",
+        "--dataset.single_task=play",
+        "--dataset.fps=20",
+        "--dataset.num_episodes=2",
+        "--dataset.episode_time_s=2",
+        "--dataset.reset_time_s=0",
+        "--dataset.push_to_hub=false",
+        "--play_sounds=false",
+    )
     recorded = LeRobotDataset("local/sim_play", root=data)
-    assert recorded.meta.total_episodes == 2 and recorded.meta.features["observation.state"]["names"] == list(STATE_NAMES)
+    assert recorded.meta.total_episodes == 2 and recorded.meta.features["observation.state"]["names"] == list(
+        STATE_NAMES
+    )
     states = np.stack(recorded.hf_dataset["observation.state"])
     assert np.ptp(states[:, :2], axis=0).max() > 0.05
 
-    run("lerobot-train", "--policy.type=efm_ac", "--dataset.repo_id=local/sim_play", f"--dataset.root={data}",
-        f"--output_dir={ckpt_dir}", *TINY_FLAGS, "--policy.image_encoder_channels=[4,8,8]",
-        "--policy.image_encoder_hidden_dim=16", "--policy.image_latent_dim=8", "--steps=4", "--save_freq=4")
-    run("lerobot-efm-goal", f"--dataset.root={data}", "--dataset.repo_id=local/sim_play", "--dataset.episode=1",
-        f"--output={goal}")
-    proc = run("lerobot-rollout", "--strategy.type=base", f"--policy.path={ckpt_dir}/checkpoints/last/pretrained_model",
-               f"--policy.goal_path={goal}", "--policy.device=cpu", "--robot.type=efm_sim_planar_push",
-               "--robot.id=sim", "--robot.image_size=32", "--duration=2", "--fps=20", "--play_sounds=false")
+    run(
+        "lerobot-train",
+        "--policy.type=efm_ac",
+        "--dataset.repo_id=local/sim_play",
+        f"--dataset.root={data}",
+        f"--output_dir={ckpt_dir}",
+        *TINY_FLAGS,
+        "--policy.image_encoder_channels=[4,8,8]",
+        "--policy.image_encoder_hidden_dim=16",
+        "--policy.image_latent_dim=8",
+        "--steps=4",
+        "--save_freq=4",
+    )
+    run(
+        "lerobot-efm-goal",
+        f"--dataset.root={data}",
+        "--dataset.repo_id=local/sim_play",
+        "--dataset.episode=1",
+        f"--output={goal}",
+    )
+    proc = run(
+        "lerobot-rollout",
+        "--strategy.type=base",
+        f"--policy.path={ckpt_dir}/checkpoints/last/pretrained_model",
+        f"--policy.goal_path={goal}",
+        "--policy.device=cpu",
+        "--robot.type=efm_sim_planar_push",
+        "--robot.id=sim",
+        "--robot.image_size=32",
+        "--duration=2",
+        "--fps=20",
+        "--play_sounds=false",
+    )
     episode = LeRobotDataset("local/sim_play", root=data, episodes=[1])
     last = [round(float(x), 4) for x in episode[len(episode) - 1]["observation.state"]]
     log = proc.stdout + proc.stderr
@@ -74,9 +113,18 @@ def test_goal_captured_from_a_live_robot(tmp_path):
 
     from lerobot_efm.scripts.goal import main as goal_cli
 
-    path = goal_cli(["--robot.type=efm_sim_planar_push", "--robot.id=g", "--robot.image_size=32",
-                     "--teleop.type=efm_scripted_planar_push", "--teleop.robot_id=g", "--fps=200",
-                     "--capture_after_s=0.5", f"--output={tmp_path / 'goal.safetensors'}"])
+    path = goal_cli(
+        [
+            "--robot.type=efm_sim_planar_push",
+            "--robot.id=g",
+            "--robot.image_size=32",
+            "--teleop.type=efm_scripted_planar_push",
+            "--teleop.robot_id=g",
+            "--fps=200",
+            "--capture_after_s=0.5",
+            f"--output={tmp_path / 'goal.safetensors'}",
+        ]
+    )
     goal = load_file(str(path))
     assert set(goal) == {"observation.state", "observation.images.top"}
     assert goal["observation.images.top"].shape == (3, 32, 32) and goal["observation.images.top"].max() <= 1.0
@@ -103,34 +151,86 @@ def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
     lerobot-rollout (episodic: it records what the robot does) drive the hand there, the disc untouched."""
     from safetensors.torch import load_file
 
-    data, ckpt_dir, goal, rollout = tmp_path / "hand", tmp_path / "train", tmp_path / "goal.st", tmp_path / "rollout"
+    data, ckpt_dir, goal, rollout = (
+        tmp_path / "hand",
+        tmp_path / "train",
+        tmp_path / "goal.st",
+        tmp_path / "rollout",
+    )
     robot = ["--robot.type=efm_sim_planar_push", "--robot.id=sim"]
-    run("lerobot-record", *robot, "--teleop.type=efm_scripted_planar_push", "--teleop.behaviour=hand",
-        "--teleop.robot_id=sim", "--dataset.repo_id=local/hand_play", f"--dataset.root={data}",
-        "--dataset.single_task=reach", "--dataset.fps=100", "--dataset.num_episodes=1", "--dataset.episode_time_s=20",
-        "--dataset.reset_time_s=0", "--dataset.push_to_hub=false", "--play_sounds=false")
+    run(
+        "lerobot-record",
+        *robot,
+        "--teleop.type=efm_scripted_planar_push",
+        "--teleop.behaviour=hand",
+        "--teleop.robot_id=sim",
+        "--dataset.repo_id=local/hand_play",
+        f"--dataset.root={data}",
+        "--dataset.single_task=reach",
+        "--dataset.fps=100",
+        "--dataset.num_episodes=1",
+        "--dataset.episode_time_s=20",
+        "--dataset.reset_time_s=0",
+        "--dataset.push_to_hub=false",
+        "--play_sounds=false",
+    )
     states = np.stack(LeRobotDataset("local/hand_play", root=data).hf_dataset["observation.state"])
     assert len(states) > 1000 and np.ptp(states[:, 2:], axis=0).max() == 0.0  # the disc was never touched
 
-    run("lerobot-train", "--policy.type=efm_gc", "--dataset.repo_id=local/hand_play", f"--dataset.root={data}",
-        f"--output_dir={ckpt_dir}", "--policy.device=cpu", "--policy.push_to_hub=false",
-        "--policy.max_goal_distance=100", "--policy.obs_traj_stride=4", "--policy.mlp_hidden_dims=[64,64]",
-        "--policy.unet_down_dims=[16,32,32]", "--policy.unet_n_groups=4", "--policy.num_inference_steps=5",
-        "--wandb.enable=false", "--num_workers=0", "--batch_size=64", "--log_freq=500", "--steps=1000",
-        "--save_freq=1000", timeout=600)
+    run(
+        "lerobot-train",
+        "--policy.type=efm_gc",
+        "--dataset.repo_id=local/hand_play",
+        f"--dataset.root={data}",
+        f"--output_dir={ckpt_dir}",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        "--policy.max_goal_distance=100",
+        "--policy.obs_traj_stride=4",
+        "--policy.mlp_hidden_dims=[64,64]",
+        "--policy.unet_down_dims=[16,32,32]",
+        "--policy.unet_n_groups=4",
+        "--policy.num_inference_steps=5",
+        "--wandb.enable=false",
+        "--num_workers=0",
+        "--batch_size=64",
+        "--log_freq=500",
+        "--steps=1000",
+        "--save_freq=1000",
+        timeout=600,
+    )
     frame = _goal_frame_clear_of_the_disc(states)
-    run("lerobot-efm-goal", f"--dataset.root={data}", "--dataset.repo_id=local/hand_play", f"--dataset.frame={frame}",
-        f"--output={goal}")
+    run(
+        "lerobot-efm-goal",
+        f"--dataset.root={data}",
+        "--dataset.repo_id=local/hand_play",
+        f"--dataset.frame={frame}",
+        f"--output={goal}",
+    )
     target = load_file(str(goal))["observation.state"].numpy()
     assert np.allclose(target, states[frame])
 
-    run("lerobot-rollout", "--strategy.type=episodic", f"--policy.path={ckpt_dir}/checkpoints/last/pretrained_model",
-        f"--policy.goal_path={goal}", "--policy.device=cpu", *robot, "--dataset.repo_id=local/rollout_reach",
-        f"--dataset.root={rollout}", "--dataset.single_task=reach", "--dataset.num_episodes=1",
-        "--dataset.episode_time_s=8", "--dataset.reset_time_s=0", "--dataset.push_to_hub=false", "--fps=50",
-        "--play_sounds=false")
+    run(
+        "lerobot-rollout",
+        "--strategy.type=episodic",
+        f"--policy.path={ckpt_dir}/checkpoints/last/pretrained_model",
+        f"--policy.goal_path={goal}",
+        "--policy.device=cpu",
+        *robot,
+        "--dataset.repo_id=local/rollout_reach",
+        f"--dataset.root={rollout}",
+        "--dataset.single_task=reach",
+        "--dataset.num_episodes=1",
+        "--dataset.episode_time_s=8",
+        "--dataset.reset_time_s=0",
+        "--dataset.push_to_hub=false",
+        "--fps=50",
+        "--play_sounds=false",
+    )
     driven = np.stack(LeRobotDataset("local/rollout_reach", root=rollout).hf_dataset["observation.state"])
     assert np.allclose(driven[0], states[0], atol=1e-4)  # the robot starts where the play started
     # success as the planar push env defines it, at any step: hand and disc each within 0.04 of the goal's
     error = np.linalg.norm((driven - target).reshape(len(driven), 2, 2), axis=-1).max(axis=-1)
-    assert error.min() < 0.04, f"closest approach {error.min():.3f} (hand {driven[error.argmin(), :2]}, goal {target})"
+    assert error.min() < 0.04, (
+        f"closest approach {error.min():.3f} (hand {driven[error.argmin(), :2]}, goal {target})"
+    )

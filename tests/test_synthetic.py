@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 import torch
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 import lerobot_efm.synthetic as synthetic
-from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot_efm.envs.point_reach import in_wall, move_point, render_scene
 from lerobot_efm.synthetic import make_point_play_dataset
 
@@ -43,8 +43,9 @@ def test_state_only_dataset(tmp_path):
 
 def test_video_dataset(tmp_path):
     root = tmp_path / "play_video"
-    make_point_play_dataset(root, repo_id=REPO, num_episodes=2, episode_length=40, with_images=True,
-                            image_size=32)
+    make_point_play_dataset(
+        root, repo_id=REPO, num_episodes=2, episode_length=40, with_images=True, image_size=32
+    )
     ds = LeRobotDataset(REPO, root=root)
     assert ds.num_episodes == 2 and ds.num_frames == 80
     assert ds.meta.video_keys == ["observation.images.top"]

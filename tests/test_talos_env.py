@@ -12,13 +12,17 @@ import torch  # noqa: E402
 pytest.importorskip("mujoco")
 
 from gymnasium.utils.env_checker import check_env  # noqa: E402
-
 from lerobot.envs.configs import EnvConfig  # noqa: E402
 from lerobot.envs.factory import make_env  # noqa: E402
 from lerobot.envs.utils import env_to_policy_features, preprocess_observation  # noqa: E402
+
 from lerobot_efm.envs.talos_kitchen import tasks  # noqa: E402
 from lerobot_efm.envs.talos_kitchen.env import (  # noqa: E402
-    ENV_STATE_NAMES, GYM_ID, STATE_NAMES, TalosKitchenEnv, TalosKitchenEnvConfig,
+    ENV_STATE_NAMES,
+    GYM_ID,
+    STATE_NAMES,
+    TalosKitchenEnv,
+    TalosKitchenEnvConfig,
 )
 
 SIZE = 64
@@ -49,7 +53,11 @@ def test_task_suite():
     assert {"open_door", "close_door", "pull_tray", "push_tray", "move_pot_on_table"} <= set(tasks.TASKS)
     long = tasks.TASKS[tasks.LONG_TASK]  # paper Fig. 8
     # adapted to what the primitives achieve (see the tasks module docstring)
-    assert (long.initial.door, long.initial.tray, long.initial.pot_on) == (tasks.DOOR_OPEN, tasks.TRAY_IN, "table")
+    assert (long.initial.door, long.initial.tray, long.initial.pot_on) == (
+        tasks.DOOR_OPEN,
+        tasks.TRAY_IN,
+        "table",
+    )
     assert (long.goal.door, long.goal.tray, long.goal.pot_on) == (tasks.DOOR_CLOSED, tasks.TRAY_OUT, "tray")
     for t in tasks.TASKS.values():
         assert t.initial != t.goal and t.description
@@ -106,11 +114,13 @@ def test_success_when_objects_set_to_goal_qpos():
         np.testing.assert_allclose(goal[1] - start[1], tasks.TRAY_OUT, atol=0.01)
         from lerobot_efm.envs.talos_kitchen import scene
 
-        np.testing.assert_allclose(goal[2], scene.TRAY_POS0[0] + tasks.TRAY_OUT + tasks.POT_TRAY_XY[0], atol=0.01)
+        np.testing.assert_allclose(
+            goal[2], scene.TRAY_POS0[0] + tasks.TRAY_OUT + tasks.POT_TRAY_XY[0], atol=0.01
+        )
         assert goal[4] < start[4] - 0.05
         h, d = e.h, e.data
         d.qpos[h.door_qpos], d.qpos[h.tray_qpos] = goal[0], goal[1]
-        d.qpos[h.pot_qpos: h.pot_qpos + 7] = goal[2:9]
+        d.qpos[h.pot_qpos : h.pot_qpos + 7] = goal[2:9]
         d.qvel[:] = 0.0
         obs, reward, terminated, _, info = e.step(_hold(obs))
         assert info["is_success"] and terminated, info
@@ -129,8 +139,9 @@ def test_invalid_actions(env):
     obs, *_ = env.step(far)
     from lerobot_efm.envs.talos_kitchen.control import WORKSPACE_HIGH, WORKSPACE_LOW
 
-    np.testing.assert_allclose(obs["agent_pos"][:3], [WORKSPACE_HIGH[0], WORKSPACE_LOW[1], WORKSPACE_HIGH[2]],
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        obs["agent_pos"][:3], [WORKSPACE_HIGH[0], WORKSPACE_LOW[1], WORKSPACE_HIGH[2]], atol=1e-6
+    )
 
 
 def test_all_cycles_through_suite():
@@ -177,6 +188,8 @@ def test_lerobot_factory_keys():
                 assert 0.0 <= float(v.min()) and float(v.max()) <= 1.0
         # goal image went through the same conversion as the camera image
         goal = batch["observation.goal.images.front"]
-        assert torch.allclose(goal[0], torch.from_numpy(obs["goal.images.front"][0]).permute(2, 0, 1).float() / 255)
+        assert torch.allclose(
+            goal[0], torch.from_numpy(obs["goal.images.front"][0]).permute(2, 0, 1).float() / 255
+        )
     finally:
         vec.close()

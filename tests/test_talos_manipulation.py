@@ -75,7 +75,9 @@ def test_tray_pull_and_push():
 def test_pot_pick_and_place_on_table():
     model, data, h, ctrl = _setup()
     p0, _ = scene.pot_pose(data, h)
-    last = primitives.execute(ctrl, data, primitives.pot_pick_place(data, h, primitives.home_command(), (0.45, -0.34)))
+    last = primitives.execute(
+        ctrl, data, primitives.pot_pick_place(data, h, primitives.home_command(), (0.45, -0.34))
+    )
     for _ in range(25):  # let it settle after the release
         ctrl.step(data, last)
     p1, q1 = scene.pot_pose(data, h)

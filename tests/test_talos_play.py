@@ -62,7 +62,14 @@ def test_coverage_counts_task_states():
     closed = play.state_env_vec(tasks.TASKS["open_door"].initial)
     on_tray = play.state_env_vec(tasks.TASKS["pot_to_tray"].goal)
     quat = np.array([1.0, 0, 0, 0])
-    e = np.array([np.r_[closed, quat], np.r_[on_tray, quat], np.r_[closed, quat], np.r_[closed + [0.5, 0, 0, 0, 0], quat]])
+    e = np.array(
+        [
+            np.r_[closed, quat],
+            np.r_[on_tray, quat],
+            np.r_[closed, quat],
+            np.r_[closed + [0.5, 0, 0, 0, 0], quat],
+        ]
+    )
     cov = play.coverage(e)
     assert cov["state/door_closed/tray_in/pot_home"] == {"frames": 2, "visits": 2}
     assert cov["state/door_closed/tray_out/pot_tray"] == {"frames": 1, "visits": 1}

@@ -30,8 +30,15 @@ def run(*args, timeout=400):
 @pytest.fixture(scope="module")
 def talos_play(tmp_path_factory):
     root = tmp_path_factory.mktemp("talos") / "play"
-    run(BIN / "lerobot-efm-record", "--env.type=talos_kitchen", f"--root={root}",
-        f"--repo_id={REPO}", "--episodes=2", "--episode_length=70", "--seed=5")
+    run(
+        BIN / "lerobot-efm-record",
+        "--env.type=talos_kitchen",
+        f"--root={root}",
+        f"--repo_id={REPO}",
+        "--episodes=2",
+        "--episode_length=70",
+        "--seed=5",
+    )
     return root
 
 
@@ -47,43 +54,91 @@ def test_recording_is_a_lerobot_video_dataset(talos_play):
     assert item["observation.images.front"].shape == (3, 128, 128)  # the env's default camera
     actions = np.stack([ds[i]["action"].numpy() for i in range(70)])
     state = np.stack([ds[i]["observation.state"].numpy() for i in range(70)])
-    assert np.isfinite(actions).all() and np.ptp(actions[:, :3], axis=0).max() > 0.01  # the operator moves the hand
-    np.testing.assert_allclose(state[1:, :3], np.clip(actions[:-1, :3], -10, 10), atol=1e-5)  # state holds the last command
+    assert (
+        np.isfinite(actions).all() and np.ptp(actions[:, :3], axis=0).max() > 0.01
+    )  # the operator moves the hand
+    np.testing.assert_allclose(
+        state[1:, :3], np.clip(actions[:-1, :3], -10, 10), atol=1e-5
+    )  # state holds the last command
 
 
 def test_dataset_viz_shows_the_recording(talos_play, tmp_path):
-    run(BIN / "lerobot-dataset-viz", f"--repo-id={REPO}", f"--root={talos_play}", "--episode-index=1",
-        "--save=1", f"--output-dir={tmp_path}", "--num-workers=0")
+    run(
+        BIN / "lerobot-dataset-viz",
+        f"--repo-id={REPO}",
+        f"--root={talos_play}",
+        "--episode-index=1",
+        "--save=1",
+        f"--output-dir={tmp_path}",
+        "--num-workers=0",
+    )
     rrd = list(tmp_path.glob("*.rrd"))
     assert rrd and rrd[0].stat().st_size > 10_000
 
 
 def test_train_and_eval_efm_ac_on_the_recording(talos_play, tmp_path):
     out = tmp_path / "train"
-    run(BIN / "lerobot-train", "--policy.type=efm_ac", f"--dataset.repo_id={REPO}", f"--dataset.root={talos_play}",
-        "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.max_goal_distance=60",
-        "--policy.obs_traj_stride=5", "--policy.mlp_hidden_dims=[32,32]", "--policy.unet_down_dims=[8,16,16]",
-        "--policy.unet_n_groups=4", "--policy.image_encoder_channels=[4,8,8]", "--policy.image_encoder_hidden_dim=16",
-        "--policy.image_latent_dim=8", "--policy.num_inference_steps=2", "--steps=3", "--batch_size=4",
-        "--num_workers=0", "--save_freq=3", "--wandb.enable=false", f"--output_dir={out}")
+    run(
+        BIN / "lerobot-train",
+        "--policy.type=efm_ac",
+        f"--dataset.repo_id={REPO}",
+        f"--dataset.root={talos_play}",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        "--policy.max_goal_distance=60",
+        "--policy.obs_traj_stride=5",
+        "--policy.mlp_hidden_dims=[32,32]",
+        "--policy.unet_down_dims=[8,16,16]",
+        "--policy.unet_n_groups=4",
+        "--policy.image_encoder_channels=[4,8,8]",
+        "--policy.image_encoder_hidden_dim=16",
+        "--policy.image_latent_dim=8",
+        "--policy.num_inference_steps=2",
+        "--steps=3",
+        "--batch_size=4",
+        "--num_workers=0",
+        "--save_freq=3",
+        "--wandb.enable=false",
+        f"--output_dir={out}",
+    )
     ckpt = out / "checkpoints" / "last" / "pretrained_model"
     cfg = json.loads((ckpt / "config.json").read_text())
-    assert {"observation.images.front", "observation.goal.images.front", "observation.goal.state"} <= set(cfg["input_features"])
-    run(BIN / "lerobot-eval", f"--policy.path={ckpt}", "--env.type=talos_kitchen", "--env.task=open_door",
-        "--env.episode_length=8", "--eval.n_episodes=1", "--eval.batch_size=1",
-        "--policy.device=cpu", f"--output_dir={tmp_path / 'eval'}")
+    assert {"observation.images.front", "observation.goal.images.front", "observation.goal.state"} <= set(
+        cfg["input_features"]
+    )
+    run(
+        BIN / "lerobot-eval",
+        f"--policy.path={ckpt}",
+        "--env.type=talos_kitchen",
+        "--env.task=open_door",
+        "--env.episode_length=8",
+        "--eval.n_episodes=1",
+        "--eval.batch_size=1",
+        "--policy.device=cpu",
+        f"--output_dir={tmp_path / 'eval'}",
+    )
     info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1 and 0.0 <= info["overall"]["pc_success"] <= 100.0
 
 
-@pytest.mark.parametrize("config_file", sorted(p.name for p in (PROJECT / "train_configs").glob("talos_kitchen_*.json")))
+@pytest.mark.parametrize(
+    "config_file", sorted(p.name for p in (PROJECT / "train_configs").glob("talos_kitchen_*.json"))
+)
 def test_shipped_talos_train_configs(talos_play, tmp_path, config_file):
     """The shipped Talos configs (state-only CPU configs, the paper's image config) train on a recording:
     config drift checked in-process (tests/inprocess_train.py), lerobot-train itself runs in the test above."""
     from inprocess_train import train_one_step
 
-    policy = train_one_step(PROJECT / "train_configs" / config_file, f"--dataset.repo_id={REPO}",
-                            f"--dataset.root={talos_play}", "--policy.device=cpu", "--batch_size=4", "--num_workers=0",
-                            f"--output_dir={tmp_path / 'run'}")
+    policy = train_one_step(
+        PROJECT / "train_configs" / config_file,
+        f"--dataset.repo_id={REPO}",
+        f"--dataset.root={talos_play}",
+        "--policy.device=cpu",
+        "--batch_size=4",
+        "--num_workers=0",
+        f"--output_dir={tmp_path / 'run'}",
+    )
     expected = json.loads((PROJECT / "train_configs" / config_file).read_text())["policy"]
-    assert policy.config.type == expected["type"] and set(expected["input_features"]) <= set(policy.config.input_features)
+    assert policy.config.type == expected["type"] and set(expected["input_features"]) <= set(
+        policy.config.input_features
+    )

@@ -30,17 +30,27 @@ def _tray_top_xy(env, slide):
 def _plans(env):
     """Per task: primitive generator factories (each called with the last command), one per sub-task."""
     d, h = env.data, env.h
-    door = {"open": lambda c: primitives.open_door(d, h, c, tasks.DOOR_OPEN),
-            "close": lambda c: primitives.close_door(d, h, c, tasks.DOOR_CLOSED)}
-    tray = {"pull": lambda c: primitives.tray_move(d, h, c, tasks.TRAY_OUT),
-            "push": lambda c: primitives.tray_move(d, h, c, tasks.TRAY_IN)}
+    door = {
+        "open": lambda c: primitives.open_door(d, h, c, tasks.DOOR_OPEN),
+        "close": lambda c: primitives.close_door(d, h, c, tasks.DOOR_CLOSED),
+    }
+    tray = {
+        "pull": lambda c: primitives.tray_move(d, h, c, tasks.TRAY_OUT),
+        "push": lambda c: primitives.tray_move(d, h, c, tasks.TRAY_IN),
+    }
     top = scene.TRAY_POS0[2] + 0.008
     home = scene.POT_HOME
-    pot = {"to_tray": lambda c: primitives.pot_pick_place(d, h, c, _tray_top_xy(env, tasks.TRAY_OUT), place_z=top),
-           "to_table": lambda c: primitives.pot_pick_place(d, h, c, (home[0] + tasks.POT_TABLE_HOME[0],
-                                                                      home[1] + tasks.POT_TABLE_HOME[1])),
-           "moved": lambda c: primitives.pot_pick_place(d, h, c, (home[0] + tasks.POT_TABLE_MOVED[0],
-                                                                   home[1] + tasks.POT_TABLE_MOVED[1]))}
+    pot = {
+        "to_tray": lambda c: primitives.pot_pick_place(
+            d, h, c, _tray_top_xy(env, tasks.TRAY_OUT), place_z=top
+        ),
+        "to_table": lambda c: primitives.pot_pick_place(
+            d, h, c, (home[0] + tasks.POT_TABLE_HOME[0], home[1] + tasks.POT_TABLE_HOME[1])
+        ),
+        "moved": lambda c: primitives.pot_pick_place(
+            d, h, c, (home[0] + tasks.POT_TABLE_MOVED[0], home[1] + tasks.POT_TABLE_MOVED[1])
+        ),
+    }
     return {
         "open_door": [door["open"]],
         "close_door": [door["close"]],

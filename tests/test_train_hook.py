@@ -8,9 +8,9 @@ import sys
 import types
 from pathlib import Path
 
+import lerobot.scripts.lerobot_train as lerobot_train
 from conftest import REPO_ID, tiny_config
 
-import lerobot.scripts.lerobot_train as lerobot_train
 from lerobot_efm import train_hook
 from lerobot_efm.hindsight import HindsightGoalDataset
 
@@ -48,11 +48,26 @@ def test_missing_name_is_reported(monkeypatch, caplog):
 def test_python_dash_m_launch_is_hooked(state_dataset_root, tmp_path):
     """`python -m lerobot.scripts.lerobot_train` runs the script as __main__, which must be patched too."""
     env = {**os.environ, "HF_HUB_OFFLINE": "1"}
-    args = [sys.executable, "-m", "lerobot.scripts.lerobot_train", "--policy.type=efm_gc", f"--dataset.repo_id={REPO_ID}",
-            f"--dataset.root={state_dataset_root}", f"--output_dir={tmp_path / 'run'}", "--policy.device=cpu",
-            "--policy.push_to_hub=false", "--policy.max_goal_distance=40", "--policy.mlp_hidden_dims=[32,32]",
-            "--policy.unet_down_dims=[8,16,16]", "--policy.unet_n_groups=4", "--steps=1", "--batch_size=4",
-            "--num_workers=0", "--wandb.enable=false", "--log_freq=1"]
+    args = [
+        sys.executable,
+        "-m",
+        "lerobot.scripts.lerobot_train",
+        "--policy.type=efm_gc",
+        f"--dataset.repo_id={REPO_ID}",
+        f"--dataset.root={state_dataset_root}",
+        f"--output_dir={tmp_path / 'run'}",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        "--policy.max_goal_distance=40",
+        "--policy.mlp_hidden_dims=[32,32]",
+        "--policy.unet_down_dims=[8,16,16]",
+        "--policy.unet_n_groups=4",
+        "--steps=1",
+        "--batch_size=4",
+        "--num_workers=0",
+        "--wandb.enable=false",
+        "--log_freq=1",
+    ]
     proc = subprocess.run(args, capture_output=True, text=True, timeout=300, env=env, cwd=REPO)
     assert proc.returncode == 0, proc.stderr[-4000:]
     assert "loss_actor" in proc.stderr + proc.stdout

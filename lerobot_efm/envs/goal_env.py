@@ -7,10 +7,8 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import torch
-
-from lerobot.configs import PipelineFeatureType, PolicyFeature
+from lerobot.configs import FeatureType, PipelineFeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.configs import FeatureType
 from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 

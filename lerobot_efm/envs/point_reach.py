@@ -14,18 +14,21 @@ HWC array under ``observation.goal.images.top`` and the env processor step of
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
 from functools import lru_cache
+from typing import ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-
 from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
 
 from .goal_env import (  # noqa: F401  (GoalImagesChannelFirstStep re-exported)
-    GoalEnvConfig, GoalImagesChannelFirstStep, add_camera_features, state_goal_features, state_goal_features_map,
+    GoalEnvConfig,
+    GoalImagesChannelFirstStep,
+    add_camera_features,
+    state_goal_features,
+    state_goal_features_map,
 )
 
 GYM_ID = "lerobot_efm/PointReach-v0"
@@ -143,8 +146,15 @@ class PointReachEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    def __init__(self, task: str = "random", obs_type: str = "state", image_size: int = 64,
-                 wall: bool = True, render_mode: str = "rgb_array", render_size: int = 256):
+    def __init__(
+        self,
+        task: str = "random",
+        obs_type: str = "state",
+        image_size: int = 64,
+        wall: bool = True,
+        render_mode: str = "rgb_array",
+        render_size: int = 256,
+    ):
         self.task = check_task(task)
         self.task_description = TASKS[task][2]
         if obs_type not in OBS_TYPES:

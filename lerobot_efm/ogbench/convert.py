@@ -17,9 +17,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.utils import SuppressProgressBars
+
 from lerobot_efm.recording import finalizing
 
 FPS = 10
@@ -34,7 +34,9 @@ def load_raw(path: str | Path) -> dict[str, np.ndarray]:
     with np.load(path) as npz:
         missing = [k for k in REQUIRED_KEYS if k not in npz.files]
         if missing:
-            raise KeyError(f"{path}: missing key(s) {missing}; OGBench raw datasets need {list(REQUIRED_KEYS)}, found {npz.files}")
+            raise KeyError(
+                f"{path}: missing key(s) {missing}; OGBench raw datasets need {list(REQUIRED_KEYS)}, found {npz.files}"
+            )
         data = {k: npz[k] for k in REQUIRED_KEYS}
     check_raw(data, str(path))
     return data
@@ -66,13 +68,22 @@ def episode_bounds(terminals: np.ndarray) -> list[tuple[int, int]]:
 def ogbench_features(obs_dim: int, action_dim: int) -> dict:
     planar = obs_dim == 2 and action_dim == 2
     return {
-        "observation.state": {"dtype": "float32", "shape": (obs_dim,), "names": ["x", "y"] if planar else None},
+        "observation.state": {
+            "dtype": "float32",
+            "shape": (obs_dim,),
+            "names": ["x", "y"] if planar else None,
+        },
         "action": {"dtype": "float32", "shape": (action_dim,), "names": ["vx", "vy"] if planar else None},
     }
 
 
 def convert_arrays(
-    data: dict[str, np.ndarray], root: str | Path, repo_id: str, fps: int = FPS, task: str = "play", source: str = "dataset"
+    data: dict[str, np.ndarray],
+    root: str | Path,
+    repo_id: str,
+    fps: int = FPS,
+    task: str = "play",
+    source: str = "dataset",
 ) -> LeRobotDataset:
     """Write raw OGBench arrays as a new LeRobot dataset at ``root`` (must not exist); returns it reopened."""
     check_raw(data, source)
@@ -80,7 +91,9 @@ def convert_arrays(
         raise FileExistsError(f"Dataset root {root} already exists; pick a new root or delete it")
     obs = np.ascontiguousarray(data["observations"], dtype=np.float32)
     act = np.ascontiguousarray(data["actions"], dtype=np.float32)
-    ds = LeRobotDataset.create(repo_id, fps=fps, features=ogbench_features(obs.shape[1], act.shape[1]), root=root, use_videos=False)
+    ds = LeRobotDataset.create(
+        repo_id, fps=fps, features=ogbench_features(obs.shape[1], act.shape[1]), root=root, use_videos=False
+    )
     with finalizing(ds):  # keeps the already saved episodes readable even if conversion fails mid-way
         for start, end in episode_bounds(data["terminals"]):
             for t in range(start, end):
@@ -90,10 +103,18 @@ def convert_arrays(
     return LeRobotDataset(repo_id, root=root)
 
 
-def convert_npz(npz_path: str | Path, root: str | Path, repo_id: str | None = None, fps: int = FPS, task: str | None = None) -> LeRobotDataset:
+def convert_npz(
+    npz_path: str | Path,
+    root: str | Path,
+    repo_id: str | None = None,
+    fps: int = FPS,
+    task: str | None = None,
+) -> LeRobotDataset:
     """``<name>.npz`` -> LeRobot dataset ``local/<name>`` at ``root``; the task label defaults to the file stem."""
     name = Path(npz_path).stem
-    return convert_arrays(load_raw(npz_path), root, repo_id or f"local/{name}", fps, task or name, str(npz_path))
+    return convert_arrays(
+        load_raw(npz_path), root, repo_id or f"local/{name}", fps, task or name, str(npz_path)
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -106,7 +127,9 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     ds = convert_npz(args.npz, args.root, args.repo_id, args.fps, args.task)
-    print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in {time.perf_counter() - t0:.1f} s")
+    print(
+        f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in {time.perf_counter() - t0:.1f} s"
+    )
 
 
 if __name__ == "__main__":

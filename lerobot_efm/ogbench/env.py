@@ -29,7 +29,6 @@ from typing import ClassVar
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_STATE
@@ -57,7 +56,9 @@ DATASETS: dict[str, tuple[int, int, int]] = {
 
 def check_dataset(dataset: str) -> str:
     if dataset not in DATASETS:
-        raise ValueError(f"Unknown OGBench dataset {dataset!r} for env type 'ogbench'; valid: {sorted(DATASETS)}")
+        raise ValueError(
+            f"Unknown OGBench dataset {dataset!r} for env type 'ogbench'; valid: {sorted(DATASETS)}"
+        )
     return dataset
 
 
@@ -72,8 +73,14 @@ class OGBenchEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": FPS}
 
-    def __init__(self, dataset: str = "pointmaze-large-navigate-v0", task: str = "all",
-                 render_backend: str = "map", render_mode: str = "rgb_array", reward: str = "success"):
+    def __init__(
+        self,
+        dataset: str = "pointmaze-large-navigate-v0",
+        task: str = "all",
+        render_backend: str = "map",
+        render_mode: str = "rgb_array",
+        reward: str = "success",
+    ):
         self.dataset, self.task = check_dataset(dataset), check_task(task)
         if reward not in REWARDS:
             raise ValueError(f"Unknown reward {reward!r}; valid: {list(REWARDS)}")
@@ -143,12 +150,20 @@ class OGBenchEnv(gym.Env):
     def step(self, action):
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         if a.shape != self.action_space.shape or not np.all(np.isfinite(a)):
-            raise ValueError(f"OGBench action must be {self.action_space.shape[0]} finite numbers, got {np.asarray(action)!r}")
+            raise ValueError(
+                f"OGBench action must be {self.action_space.shape[0]} finite numbers, got {np.asarray(action)!r}"
+            )
         ob, reward, terminated, truncated, info = self.maze.step(np.clip(a, -1.0, 1.0))
         success = bool(info["success"])
         if self.reward_type == "progress":
             reward = self._progress(success)
-        return self._obs(ob), float(reward), bool(terminated), bool(truncated), {"is_success": success, "task_id": self.task_id}
+        return (
+            self._obs(ob),
+            float(reward),
+            bool(terminated),
+            bool(truncated),
+            {"is_success": success, "task_id": self.task_id},
+        )
 
     def render(self) -> np.ndarray:
         if self.render_backend == "mujoco":
@@ -159,7 +174,9 @@ class OGBenchEnv(gym.Env):
         """Top-down RGB uint8 map: walls, goal disc (success radius), agent."""
         m = self.maze
         if self._map is None:
-            walls = np.kron(np.asarray(m.maze_map)[::-1] == 1, np.ones((CELL_PX, CELL_PX), bool))  # row 0 = top
+            walls = np.kron(
+                np.asarray(m.maze_map)[::-1] == 1, np.ones((CELL_PX, CELL_PX), bool)
+            )  # row 0 = top
             img = np.full((*walls.shape, 3), 235, np.uint8)
             img[walls] = (70, 70, 70)
             self._map = img
@@ -168,7 +185,10 @@ class OGBenchEnv(gym.Env):
         unit = m._maze_unit
         xs = (np.arange(w) + 0.5) / CELL_PX * unit - 0.5 * unit - m._offset_x
         ys = ((h - np.arange(h) - 0.5) / CELL_PX * unit - 0.5 * unit - m._offset_y)[:, None]
-        for center, radius, color in ((m.cur_goal_xy, m._goal_tol, (40, 170, 60)), (m.get_xy(), 0.35 * unit / 2, (210, 40, 40))):
+        for center, radius, color in (
+            (m.cur_goal_xy, m._goal_tol, (40, 170, 60)),
+            (m.get_xy(), 0.35 * unit / 2, (210, 40, 40)),
+        ):
             img[np.hypot(xs - center[0], ys - center[1]) <= radius] = color
         return img
 
@@ -200,7 +220,9 @@ class OGBenchEnvConfig(GoalEnvConfig):
         check_dataset(self.dataset)
         check_task(self.task)
         if self.render_backend not in RENDER_BACKENDS:
-            raise ValueError(f"Unknown render_backend {self.render_backend!r}; valid: {list(RENDER_BACKENDS)}")
+            raise ValueError(
+                f"Unknown render_backend {self.render_backend!r}; valid: {list(RENDER_BACKENDS)}"
+            )
         if self.reward not in REWARDS:
             raise ValueError(f"Unknown --env.reward={self.reward!r}; valid: {list(REWARDS)}")
         obs_dim, act_dim, _ = DATASETS[self.dataset]

@@ -108,7 +108,9 @@ def oracle_direction(maze, noise: float = 0.0, exact_goal: bool = False) -> np.n
     return np.clip(direction, -1.0, 1.0)
 
 
-def evaluate_oracle(dataset: str = "pointmaze-large-navigate-v0", episodes_per_task: int = 2, seed: int = 0) -> dict[str, float]:
+def evaluate_oracle(
+    dataset: str = "pointmaze-large-navigate-v0", episodes_per_task: int = 2, seed: int = 0
+) -> dict[str, float]:
     """The noise-free BFS oracle on OGBench's five tasks (OGBench protocol, ``reward="progress"``): a reference
     row for agent tables. Returns success % and the mean share (%) of the maze distance closed."""
     from .env import TASK_NAMES, OGBenchEnv
@@ -144,7 +146,9 @@ def generate_pointmaze(
     num_episodes = recipe.num_episodes if num_episodes is None else int(num_episodes)
     episode_steps = recipe.episode_steps if episode_steps is None else int(episode_steps)
     if num_episodes < 1 or episode_steps < 2:
-        raise ValueError(f"num_episodes must be >= 1 and episode_steps >= 2, got {num_episodes}, {episode_steps}")
+        raise ValueError(
+            f"num_episodes must be >= 1 and episode_steps >= 2, got {num_episodes}, {episode_steps}"
+        )
     np.random.seed(seed)
     maze = make_ogbench_env(dataset_name, terminate_at_goal=False).unwrapped
     maze.action_space.seed(seed)
@@ -165,11 +169,15 @@ def generate_pointmaze(
         else:
             near = cells_at_distance(maze.maze_map, init_ij, STITCH_CELLS)
             goal_ij = near[np.random.randint(len(near))] if near else init_ij
-        ob, _ = maze.reset(seed=seed if ep == 0 else None, options={"task_info": {"init_ij": init_ij, "goal_ij": goal_ij}})
+        ob, _ = maze.reset(
+            seed=seed if ep == 0 else None, options={"task_info": {"init_ij": init_ij, "goal_ij": goal_ij}}
+        )
         for _ in range(episode_steps):
             action = oracle_direction(maze, noise)
             next_ob, _, _, _, info = maze.step(action)
-            if recipe.kind == "navigate" and info["success"]:  # reached: draw the next goal (noisy, like reset)
+            if (
+                recipe.kind == "navigate" and info["success"]
+            ):  # reached: draw the next goal (noisy, like reset)
                 new_goal = vertices[np.random.randint(len(vertices))]
                 maze.set_goal(goal_xy=maze.add_noise(maze.ij_to_xy(new_goal)))
             out["observations"][row] = ob
@@ -216,7 +224,9 @@ def save_pointmaze_npz(
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description="Generate an OGBench pointmaze dataset locally and convert it to LeRobot v3.")
+    ap = argparse.ArgumentParser(
+        description="Generate an OGBench pointmaze dataset locally and convert it to LeRobot v3."
+    )
     ap.add_argument("--dataset", required=True, choices=sorted(RECIPES))
     ap.add_argument("--episodes", type=int, default=None, help="training episodes (default: official size)")
     ap.add_argument("--episode-steps", type=int, default=None, help="rows per episode (default: official)")
@@ -225,19 +235,31 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--root", required=True, help="LeRobot dataset directory (must not exist)")
     ap.add_argument("--repo-id", default=None, help="default: local/<dataset>")
     ap.add_argument("--npz-dir", default=None, help="where the raw npz files go (default: <root>-npz)")
-    ap.add_argument("--fps", type=int, default=None, help="dataset fps (default: lerobot_efm.ogbench.convert.FPS)")
+    ap.add_argument(
+        "--fps", type=int, default=None, help="dataset fps (default: lerobot_efm.ogbench.convert.FPS)"
+    )
     args = ap.parse_args(argv)
 
     from .convert import FPS, convert_npz
 
     npz_dir = Path(args.npz_dir) if args.npz_dir else Path(f"{Path(args.root)}-npz")
     t0 = time.perf_counter()
-    train_path, val_path = save_pointmaze_npz(args.dataset, npz_dir, args.episodes, args.episode_steps, args.noise, args.seed)
+    train_path, val_path = save_pointmaze_npz(
+        args.dataset, npz_dir, args.episodes, args.episode_steps, args.noise, args.seed
+    )
     t1 = time.perf_counter()
-    ds = convert_npz(train_path, args.root, repo_id=args.repo_id or f"local/{args.dataset}", fps=args.fps or FPS, task=args.dataset)
+    ds = convert_npz(
+        train_path,
+        args.root,
+        repo_id=args.repo_id or f"local/{args.dataset}",
+        fps=args.fps or FPS,
+        task=args.dataset,
+    )
     t2 = time.perf_counter()
     print(f"{train_path}, {val_path}: generated in {t1 - t0:.1f} s")
-    print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames, converted in {t2 - t1:.1f} s")
+    print(
+        f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames, converted in {t2 - t1:.1f} s"
+    )
 
 
 if __name__ == "__main__":

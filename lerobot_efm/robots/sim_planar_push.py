@@ -23,17 +23,20 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-
 from lerobot.robots import Robot, RobotConfig
 from lerobot.teleoperators import Teleoperator, TeleoperatorConfig
 
 STATE_NAMES = ("eff_x.pos", "eff_y.pos", "obj_x.pos", "obj_y.pos")
 ACTION_NAMES = ("x.pos", "y.pos")
 CAMERA = "top"
-PLAY_BEHAVIOURS = ("full", "partitioned", "hand")  # scripted operators of lerobot_efm.envs.planar_push.demonstrators
+PLAY_BEHAVIOURS = (
+    "full",
+    "partitioned",
+    "hand",
+)  # scripted operators of lerobot_efm.envs.planar_push.demonstrators
 
 # connected simulated robots by id, so that a scripted teleoperator of the same process can drive one
-_SIM_ROBOTS: dict[str | None, "SimPlanarPush"] = {}
+_SIM_ROBOTS: dict[str | None, SimPlanarPush] = {}
 
 
 @RobotConfig.register_subclass("efm_sim_planar_push")
@@ -56,14 +59,14 @@ class SimPlanarPush(Robot):
 
     @cached_property
     def observation_features(self) -> dict:
-        features: dict = {name: float for name in STATE_NAMES}
+        features: dict = dict.fromkeys(STATE_NAMES, float)
         if self.config.image_size > 0:
             features[CAMERA] = (self.config.image_size, self.config.image_size, 3)
         return features
 
     @cached_property
     def action_features(self) -> dict:
-        return {name: float for name in ACTION_NAMES}
+        return dict.fromkeys(ACTION_NAMES, float)
 
     @property
     def is_connected(self) -> bool:
@@ -79,8 +82,12 @@ class SimPlanarPush(Robot):
         if self.env is not None:
             raise RuntimeError(f"{self} is already connected")
         obs_type = "pixels_state" if self.config.image_size > 0 else "state"
-        self.env = PlanarPushEnv(task="all", obs_type=obs_type, image_size=max(self.config.image_size, 8),
-                                 terminate_on_success=False)
+        self.env = PlanarPushEnv(
+            task="all",
+            obs_type=obs_type,
+            image_size=max(self.config.image_size, 8),
+            terminate_on_success=False,
+        )
         self.env.reset(seed=self.config.seed, options={"pair": self.config.start_pair})
         _SIM_ROBOTS[self.id] = self
 
@@ -135,7 +142,7 @@ class ScriptedPlanarPush(Teleoperator):
 
     @cached_property
     def action_features(self) -> dict:
-        return {name: float for name in ACTION_NAMES}
+        return dict.fromkeys(ACTION_NAMES, float)
 
     @cached_property
     def feedback_features(self) -> dict:
@@ -161,16 +168,20 @@ class ScriptedPlanarPush(Teleoperator):
     def _robot(self) -> SimPlanarPush:
         robot = _SIM_ROBOTS.get(self.config.robot_id)
         if robot is None:
-            raise RuntimeError(f"no connected efm_sim_planar_push robot with id {self.config.robot_id!r} in this "
-                               f"process (connected: {sorted(map(str, _SIM_ROBOTS))}); pass --teleop.robot_id=<its "
-                               f"--robot.id>")
+            raise RuntimeError(
+                f"no connected efm_sim_planar_push robot with id {self.config.robot_id!r} in this "
+                f"process (connected: {sorted(map(str, _SIM_ROBOTS))}); pass --teleop.robot_id=<its "
+                f"--robot.id>"
+            )
         return robot
 
     def get_action(self) -> dict:
         from lerobot_efm.envs.planar_push.demonstrators import BEHAVIOURS
 
         robot = self._robot()
-        if self.operator is None:  # plays on from the state the robot is in (no reset: no jump in the recording)
+        if (
+            self.operator is None
+        ):  # plays on from the state the robot is in (no reset: no jump in the recording)
             cls = BEHAVIOURS[self.config.behaviour][0]
             self.operator = cls(robot.env, np.random.default_rng(self.config.seed), noise=self.config.noise)
         command = self.operator.act(robot.env.observe())

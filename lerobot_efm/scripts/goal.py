@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
-
 from lerobot.configs import parser
 from lerobot.robots import RobotConfig
 from lerobot.teleoperators import TeleoperatorConfig
@@ -54,8 +53,10 @@ def describe(goal: dict) -> str:
         if value.dim() <= 1:
             lines.append(f"  {key}: {[round(float(x), 4) for x in value.reshape(-1)]}")
         else:
-            lines.append(f"  {key}: {tuple(value.shape)} {value.dtype}, range [{float(value.min()):.3f}, "
-                         f"{float(value.max()):.3f}]")
+            lines.append(
+                f"  {key}: {tuple(value.shape)} {value.dtype}, range [{float(value.min()):.3f}, "
+                f"{float(value.max()):.3f}]"
+            )
     return "\n".join(lines)
 
 
@@ -129,7 +130,9 @@ def export_goal(cfg: GoalConfig) -> Path:
         goal = capture_from_robot(cfg)
         source = f"robot {cfg.robot.type}"
     elif cfg.dataset.root is not None:
-        goal = read_dataset_frame(cfg.dataset.root, cfg.dataset.episode, cfg.dataset.frame, cfg.dataset.repo_id)
+        goal = read_dataset_frame(
+            cfg.dataset.root, cfg.dataset.episode, cfg.dataset.frame, cfg.dataset.repo_id
+        )
         source = f"episode {cfg.dataset.episode}, frame {cfg.dataset.frame} of {cfg.dataset.root}"
     else:
         raise ValueError("give --dataset.root (a LeRobot dataset frame) or --robot.type (a live robot)")

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-
-import lerobot_efm  # noqa: F401  (registers the efm_* policies)
 from lerobot.configs import parser
 from lerobot.configs.policies import PreTrainedConfig
+
+import lerobot_efm  # noqa: F401  (registers the efm_* policies)
 from lerobot_efm.scripts import run_cli
 
 logger = logging.getLogger(__name__)
@@ -46,7 +46,9 @@ class LogDatasetConfig:
         if self.policy is None:
             self.policy = PreTrainedConfig.get_choice_class("efm_ps")(device="cpu")
         if not hasattr(self.policy, "obs_traj_len"):
-            raise ValueError(f"--policy.type must be an EFM policy (efm_gc/ac/pc/ps/as), got {self.policy.type!r}.")
+            raise ValueError(
+                f"--policy.type must be an EFM policy (efm_gc/ac/pc/ps/as), got {self.policy.type!r}."
+            )
         if self.num_samples < 1:
             raise ValueError(f"num_samples must be >= 1, got {self.num_samples}.")
 
@@ -58,7 +60,6 @@ class LogDatasetConfig:
 def log_dataset(cfg: LogDatasetConfig) -> list[dict]:
     """Sample ``cfg.num_samples`` rows (without replacement, seeded), log them, save ``cfg.output``."""
     import rerun as rr
-
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     from ..hindsight import HindsightGoalDataset, HindsightSpec
@@ -79,8 +80,11 @@ def log_dataset(cfg: LogDatasetConfig) -> list[dict]:
     rec.send_recording_name(f"hindsight samples of {cfg.repo_id} ({cfg.policy.type})")
     try:
         logged = log_hindsight_samples(rec, dataset, indices, get_env_viz(cfg.env_type))
-        cameras = sorted(k[len("observation.images."):] for k in [*dataset.video_keys, *dataset.image_keys]
-                         if k.startswith("observation.images."))
+        cameras = sorted(
+            k[len("observation.images.") :]
+            for k in [*dataset.video_keys, *dataset.image_keys]
+            if k.startswith("observation.images.")
+        )
         rec.send_blueprint(samples_blueprint(len(logged), cameras))
     finally:
         rec.flush()
@@ -91,8 +95,10 @@ def log_dataset(cfg: LogDatasetConfig) -> list[dict]:
 @parser.wrap()
 def log_dataset_main(cfg: LogDatasetConfig) -> list[dict]:
     logged = log_dataset(cfg)
-    print(f"Wrote {cfg.output}: {len(logged)} hindsight sample(s), d = {[int(s['d']) for s in logged]}. "
-          f"View it with: rerun {cfg.output}")
+    print(
+        f"Wrote {cfg.output}: {len(logged)} hindsight sample(s), d = {[int(s['d']) for s in logged]}. "
+        f"View it with: rerun {cfg.output}"
+    )
     return logged
 
 

@@ -7,7 +7,6 @@ Ctrl-C keeps every saved episode (the unfinished one is dropped) and finalizes t
 ``--resume=true`` appends to it later. See :mod:`lerobot_efm.recording`.
 """
 
-
 import logging
 import time
 from contextlib import closing
@@ -15,11 +14,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
 from lerobot.configs import parser
 from lerobot.envs.configs import EnvConfig
+
 from lerobot_efm.recording import (
-    dataset_features, finalizing, flatten_observation, make_raw_env, open_dataset, operator_class, record_episodes,
+    dataset_features,
+    finalizing,
+    flatten_observation,
+    make_raw_env,
+    open_dataset,
+    operator_class,
+    record_episodes,
 )
 from lerobot_efm.scripts import run_cli
 
@@ -49,23 +54,46 @@ def record(cfg: RecordConfig):
     first = flatten_observation(operator.reset(), cfg.env.features_map)
     names = getattr(env, "feature_names", None)
     features = dataset_features(first, int(np.prod(env.action_space.shape)), names, cfg.video)
-    dataset = open_dataset(Path(cfg.root), cfg.repo_id, cfg.env.fps, features, cfg.resume, cfg.env.type, cfg.video)
+    dataset = open_dataset(
+        Path(cfg.root), cfg.repo_id, cfg.env.fps, features, cfg.resume, cfg.env.type, cfg.video
+    )
     start = dataset.meta.total_episodes
     task = cfg.task or getattr(operator, "task", "play")
 
     t0 = time.perf_counter()
 
     def progress(ep, n, stats):
-        logging.info("episode %d: %d frames saved (%d episodes, %d frames, %.1f frames/s)", start + ep, n,
-                     stats.saved, stats.frames, stats.frames / max(1e-9, time.perf_counter() - t0))
+        logging.info(
+            "episode %d: %d frames saved (%d episodes, %d frames, %.1f frames/s)",
+            start + ep,
+            n,
+            stats.saved,
+            stats.frames,
+            stats.frames / max(1e-9, time.perf_counter() - t0),
+        )
 
     with finalizing(dataset), closing(env):
-        stats = record_episodes(dataset, env, operator, cfg.env.features_map, episodes=cfg.episodes,
-                                episode_length=cfg.episode_length, task=task, seed=cfg.seed + start,
-                                on_episode=progress)
-    logging.info("%s: %d episodes saved this run (%d frames, %.0f s)%s; dataset now %d episodes, %d frames",
-                 Path(cfg.root).resolve(), stats.saved, stats.frames, stats.seconds,
-                 " - interrupted" if stats.interrupted else "", dataset.meta.total_episodes, dataset.meta.total_frames)
+        stats = record_episodes(
+            dataset,
+            env,
+            operator,
+            cfg.env.features_map,
+            episodes=cfg.episodes,
+            episode_length=cfg.episode_length,
+            task=task,
+            seed=cfg.seed + start,
+            on_episode=progress,
+        )
+    logging.info(
+        "%s: %d episodes saved this run (%d frames, %.0f s)%s; dataset now %d episodes, %d frames",
+        Path(cfg.root).resolve(),
+        stats.saved,
+        stats.frames,
+        stats.seconds,
+        " - interrupted" if stats.interrupted else "",
+        dataset.meta.total_episodes,
+        dataset.meta.total_frames,
+    )
     for line in stats.failed:
         logging.warning("dropped %s", line)
     if cfg.push_to_hub:

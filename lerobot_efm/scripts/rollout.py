@@ -9,20 +9,19 @@ The loop is lerobot-eval's (``preprocess_observation`` -> env preprocessor -> po
 is logged is described in :mod:`lerobot_efm.viz.rollout_log`.
 """
 
-
 import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
-
-import lerobot_efm  # noqa: F401  (registers the efm_* policies and envs)
 from lerobot import envs as lerobot_envs
 from lerobot.configs import parser
 from lerobot.configs.policies import PreTrainedConfig
-from lerobot_efm.scripts import run_cli
 from lerobot.utils.constants import ACTION
+
+import lerobot_efm  # noqa: F401  (registers the efm_* policies and envs)
+from lerobot_efm.scripts import run_cli
 
 from ..viz.rollout_log import RolloutLogger
 
@@ -96,8 +95,20 @@ def _task_text(env) -> str:
     return ""
 
 
-def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, postprocessor, log: RolloutLogger,
-                index: int, seed: int, max_steps: int, render: bool, on_first_step=None) -> dict:
+def run_episode(
+    env,
+    policy,
+    env_preprocessor,
+    env_postprocessor,
+    preprocessor,
+    postprocessor,
+    log: RolloutLogger,
+    index: int,
+    seed: int,
+    max_steps: int,
+    render: bool,
+    on_first_step=None,
+) -> dict:
     """One episode in env 0 of a (1-env) vector env, as lerobot_eval's rollout, logging every step;
     ``on_first_step()`` is called once the first observation is logged."""
     from lerobot.envs.utils import NEW_ROLLOUT_OPTION, preprocess_observation
@@ -135,12 +146,16 @@ def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, 
         step += 1
         if not done:
             continue
-        final = info.get("final_obs")  # autoreset SAME_STEP: `observation` already belongs to the next episode
+        final = info.get(
+            "final_obs"
+        )  # autoreset SAME_STEP: `observation` already belongs to the next episode
         if final is not None:
             try:
                 final_obs = final[0] if not isinstance(final, dict) else {k: v[0] for k, v in final.items()}
-                batched = {k: (v[None] if isinstance(v, np.ndarray) else {c: im[None] for c, im in v.items()})
-                           for k, v in final_obs.items()}
+                batched = {
+                    k: (v[None] if isinstance(v, np.ndarray) else {c: im[None] for c, im in v.items()})
+                    for k, v in final_obs.items()
+                }
                 log.log_observation(step, env_preprocessor(preprocess_observation(batched)))
             except Exception as e:  # noqa: BLE001  (env-specific final observations: only a nicety)
                 logger.debug("final observation not logged: %s", e)
@@ -148,13 +163,19 @@ def run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, 
         obs = env_preprocessor(preprocess_observation(observation))
         log.log_observation(step, obs)
     log.end_episode(step, success)
-    return {"episode": index, "seed": seed, "length": step, "success": success, "sum_reward": reward_sum, "task": task}
+    return {
+        "episode": index,
+        "seed": seed,
+        "length": step,
+        "success": success,
+        "sum_reward": reward_sum,
+        "task": task,
+    }
 
 
 def rollout(cfg: RolloutConfig) -> list[dict]:
     """Build env, policy and processors like lerobot-eval, run ``cfg.n_episodes`` and save ``cfg.output``."""
     import rerun as rr
-
     from lerobot.envs.factory import make_env, make_env_pre_post_processors
     from lerobot.policies import make_policy, make_pre_post_processors
     from lerobot.utils.random_utils import set_seed
@@ -165,7 +186,8 @@ def rollout(cfg: RolloutConfig) -> list[dict]:
     policy = make_policy(cfg=cfg.policy, env_cfg=cfg.env)
     policy.eval()
     preprocessor, postprocessor = make_pre_post_processors(
-        policy_cfg=cfg.policy, pretrained_path=cfg.policy.pretrained_path,
+        policy_cfg=cfg.policy,
+        pretrained_path=cfg.policy.pretrained_path,
         preprocessor_overrides={"device_processor": {"device": str(policy.config.device)}},
     )
     env_preprocessor, env_postprocessor = make_env_pre_post_processors(env_cfg=cfg.env, policy_cfg=cfg.policy)
@@ -189,8 +211,22 @@ def rollout(cfg: RolloutConfig) -> list[dict]:
                 rec.send_blueprint(log.blueprint(list(range(cfg.n_episodes))))
 
             for i in range(cfg.n_episodes):
-                results.append(run_episode(env, policy, env_preprocessor, env_postprocessor, preprocessor, postprocessor,
-                                           log, i, cfg.seed + i, max_steps, cfg.render, send_layout if i == 0 else None))
+                results.append(
+                    run_episode(
+                        env,
+                        policy,
+                        env_preprocessor,
+                        env_postprocessor,
+                        preprocessor,
+                        postprocessor,
+                        log,
+                        i,
+                        cfg.seed + i,
+                        max_steps,
+                        cfg.render,
+                        send_layout if i == 0 else None,
+                    )
+                )
                 logger.info("episode %d: %s", i, results[-1])
     finally:
         rec.flush()
@@ -203,8 +239,10 @@ def rollout(cfg: RolloutConfig) -> list[dict]:
 def rollout_main(cfg: RolloutConfig) -> list[dict]:
     results = rollout(cfg)
     n_success = sum(r["success"] for r in results)
-    print(f"Wrote {cfg.output}: {len(results)} episode(s), {n_success} success(es); "
-          f"lengths {[r['length'] for r in results]}. View it with: rerun {cfg.output}")
+    print(
+        f"Wrote {cfg.output}: {len(results)} episode(s), {n_success} success(es); "
+        f"lengths {[r['length'] for r in results]}. View it with: rerun {cfg.output}"
+    )
     return results
 
 

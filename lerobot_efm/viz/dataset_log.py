@@ -45,7 +45,9 @@ def _points(viz: EnvViz, state: np.ndarray) -> np.ndarray:
     return np.stack(list(viz.state_points(np.asarray(state, np.float32)).values()))
 
 
-def log_hindsight_samples(rec: rr.RecordingStream, dataset, indices, env_viz: EnvViz | None = None) -> list[dict]:
+def log_hindsight_samples(
+    rec: rr.RecordingStream, dataset, indices, env_viz: EnvViz | None = None
+) -> list[dict]:
     """Log ``dataset[i]`` for every ``i`` of ``indices`` (a :class:`HindsightGoalDataset`); returns, per
     sample, its frame index, episode and d (the values logged)."""
     viz = env_viz or get_env_viz(None)
@@ -60,29 +62,49 @@ def log_hindsight_samples(rec: rr.RecordingStream, dataset, indices, env_viz: En
         rec.set_time("sample", sequence=n)
         rec.log("summary/d", rr.Scalars([d]))
         rec.log(f"{root}/d", rr.Scalars([d]))
-        rec.log(f"{root}/info", rr.TextDocument(
-            f"sample {n}: dataset row {k} (frame index {int(item['index'])}, episode {ep}), d = {int(d)} frames, "
-            f"goal row {k + int(d)}; L_o={spec.obs_traj_len} S_o={spec.obs_traj_stride} "
-            f"L_a={spec.action_traj_len} S_a={spec.action_traj_stride} L_g={spec.max_goal_distance}"))
+        rec.log(
+            f"{root}/info",
+            rr.TextDocument(
+                f"sample {n}: dataset row {k} (frame index {int(item['index'])}, episode {ep}), d = {int(d)} frames, "
+                f"goal row {k + int(d)}; L_o={spec.obs_traj_len} S_o={spec.obs_traj_stride} "
+                f"L_a={spec.action_traj_len} S_a={spec.action_traj_stride} L_g={spec.max_goal_distance}"
+            ),
+        )
         if STATE_KEY in item:
             obs = _points(viz, to_numpy(item[STATE_KEY]))  # (P, 3)
-            goal = _points(viz, to_numpy(item[GOAL_PREFIX + STATE_KEY[len(OBS_PREFIX):]]))
-            rec.log(f"{root}/world/obs", rr.Points3D(obs, colors=[OBS_COLOR], radii=0.03, labels=["o"] * len(obs)))
-            rec.log(f"{root}/world/goal", rr.Points3D(goal, colors=[GOAL_COLOR], radii=0.04, labels=[f"g (d={int(d)})"] * len(goal)))
-            traj_key = TRAJ_PREFIX + STATE_KEY[len(OBS_PREFIX):]
+            goal = _points(viz, to_numpy(item[GOAL_PREFIX + STATE_KEY[len(OBS_PREFIX) :]]))
+            rec.log(
+                f"{root}/world/obs", rr.Points3D(obs, colors=[OBS_COLOR], radii=0.03, labels=["o"] * len(obs))
+            )
+            rec.log(
+                f"{root}/world/goal",
+                rr.Points3D(goal, colors=[GOAL_COLOR], radii=0.04, labels=[f"g (d={int(d)})"] * len(goal)),
+            )
+            traj_key = TRAJ_PREFIX + STATE_KEY[len(OBS_PREFIX) :]
             if traj_key in item:
                 traj = _points(viz, to_numpy(item[traj_key]))  # (P, L_o, 3)
-                rec.log(f"{root}/world/obs_traj", rr.LineStrips3D(list(traj), colors=[PLAN_COLOR] * len(traj), radii=0.008))
-                rec.log(f"{root}/world/obs_traj_points", rr.Points3D(traj.reshape(-1, 3), colors=[PLAN_COLOR], radii=0.018))
+                rec.log(
+                    f"{root}/world/obs_traj",
+                    rr.LineStrips3D(list(traj), colors=[PLAN_COLOR] * len(traj), radii=0.008),
+                )
+                rec.log(
+                    f"{root}/world/obs_traj_points",
+                    rr.Points3D(traj.reshape(-1, 3), colors=[PLAN_COLOR], radii=0.018),
+                )
             if state_all is not None:
                 lo, hi = int(dataset.episode_start[k]), int(dataset.episode_end[k])
                 path = _points(viz, to_numpy(state_all[lo:hi]))
-                rec.log(f"{root}/world/episode", rr.LineStrips3D(list(path), colors=[EPISODE_COLOR] * len(path), radii=0.003))
+                rec.log(
+                    f"{root}/world/episode",
+                    rr.LineStrips3D(list(path), colors=[EPISODE_COLOR] * len(path), radii=0.003),
+                )
         actions = to_numpy(item["action"])  # (L_a, A), raw units
         pts = viz.action_points(actions) if viz.action_points else None
         if pts is not None:
             rec.log(f"{root}/world/action_traj", rr.LineStrips3D([pts], colors=[CHUNK_COLOR], radii=0.006))
-        rec.log(f"{root}/action", rr.SeriesLines(names=[f"a{i}" for i in range(actions.shape[-1])]), static=True)
+        rec.log(
+            f"{root}/action", rr.SeriesLines(names=[f"a{i}" for i in range(actions.shape[-1])]), static=True
+        )
         for j, a in enumerate(actions):
             rec.set_time("offset", sequence=j * spec.action_traj_stride)
             rec.log(f"{root}/action", rr.Scalars(a.astype(np.float64)))
@@ -90,9 +112,13 @@ def log_hindsight_samples(rec: rr.RecordingStream, dataset, indices, env_viz: En
         for key, value in item.items():
             if not isinstance(value, torch.Tensor) or value.ndim < 3:
                 continue
-            for prefix, sub in ((GOAL_PREFIX, "goal_images"), (TRAJ_PREFIX, "traj_images"), (OBS_PREFIX, "images")):
+            for prefix, sub in (
+                (GOAL_PREFIX, "goal_images"),
+                (TRAJ_PREFIX, "traj_images"),
+                (OBS_PREFIX, "images"),
+            ):
                 if key.startswith(prefix + "images."):
-                    cam = key[len(prefix + "images."):]
+                    cam = key[len(prefix + "images.") :]
                     if sub == "traj_images":
                         for j, frame in enumerate(value):
                             rec.log(f"{root}/{sub}/{cam}/{j}", rr.Image(to_hwc_uint8(frame)))
@@ -110,7 +136,11 @@ def samples_blueprint(n: int, cameras: list[str]) -> rrb.Blueprint:
         views = [rrb.Spatial3DView(origin=f"{root}/world", name="o, g, tau")]
         images = [rrb.Spatial2DView(origin=f"{root}/images/{c}", name=f"o {c}") for c in cameras]
         images += [rrb.Spatial2DView(origin=f"{root}/goal_images/{c}", name=f"g {c}") for c in cameras]
-        side = [*images, rrb.TimeSeriesView(origin=f"{root}/action", name="tau^a"), rrb.TextDocumentView(origin=f"{root}/info")]
+        side = [
+            *images,
+            rrb.TimeSeriesView(origin=f"{root}/action", name="tau^a"),
+            rrb.TextDocumentView(origin=f"{root}/info"),
+        ]
         views.append(rrb.Vertical(*side))
         tabs.append(rrb.Horizontal(*views, name=f"sample {i}"))
     tabs.append(rrb.TimeSeriesView(origin="/summary", name="d over samples"))

@@ -132,7 +132,9 @@ POINT_REACH_VIZ = EnvViz(
 )
 
 
-def hand_points(commanded: slice = slice(0, 3), measured: slice | None = None, action: slice | None = None) -> EnvViz:
+def hand_points(
+    commanded: slice = slice(0, 3), measured: slice | None = None, action: slice | None = None
+) -> EnvViz:
     """An EnvViz for arms whose state holds the commanded and (optionally) measured hand positions and whose
     actions hold the hand position command at ``action`` (default: the ``commanded`` slice of the state).
     Talos: :data:`TALOS_KITCHEN_VIZ` (``observation.state[0:3]`` commanded, ``[10:13]`` measured)."""
@@ -155,8 +157,13 @@ def _talos_layout() -> dict[str, int]:
     """Where the hand positions and object states sit in the talos_kitchen vectors (from the env's names)."""
     from lerobot_efm.envs.talos_kitchen.env import ENV_STATE_NAMES, STATE_NAMES
 
-    return {"cmd": STATE_NAMES.index("cmd_x"), "measured": STATE_NAMES.index("x"), "door": ENV_STATE_NAMES.index("door"),
-            "tray": ENV_STATE_NAMES.index("tray"), "pot": ENV_STATE_NAMES.index("pot_x")}
+    return {
+        "cmd": STATE_NAMES.index("cmd_x"),
+        "measured": STATE_NAMES.index("x"),
+        "door": ENV_STATE_NAMES.index("door"),
+        "tray": ENV_STATE_NAMES.index("tray"),
+        "pot": ENV_STATE_NAMES.index("pot_x"),
+    }
 
 
 def _talos_objects(env_state: np.ndarray) -> dict[str, np.ndarray]:
@@ -165,21 +172,25 @@ def _talos_objects(env_state: np.ndarray) -> dict[str, np.ndarray]:
 
     i, e = _talos_layout(), np.asarray(env_state, np.float64).reshape(-1)
     # the handle helpers read only the constants of the scene when the angle / slide is given
-    return {"door_handle": scene.door_handle_pos(None, None, angle=float(e[i["door"]])).astype(np.float32),
-            "tray_handle": scene.tray_handle_pos(None, None, slide=float(e[i["tray"]])).astype(np.float32),
-            "pot": e[i["pot"]: i["pot"] + 3].astype(np.float32)}
+    return {
+        "door_handle": scene.door_handle_pos(None, None, angle=float(e[i["door"]])).astype(np.float32),
+        "tray_handle": scene.tray_handle_pos(None, None, slide=float(e[i["tray"]])).astype(np.float32),
+        "pot": e[i["pot"] : i["pot"] + 3].astype(np.float32),
+    }
 
 
 def _talos_series(env_state: np.ndarray) -> dict[str, float]:
     i, e = _talos_layout(), np.asarray(env_state, np.float64).reshape(-1)
-    pot = e[i["pot"]: i["pot"] + 3]
+    pot = e[i["pot"] : i["pot"] + 3]
     return {"door": e[i["door"]], "tray": e[i["tray"]], "pot_x": pot[0], "pot_y": pot[1], "pot_z": pot[2]}
 
 
 def _box_outline(lo, hi) -> list[list[float]]:
     """The 12 edges of an axis-aligned box as 2-point strips."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    corners = np.array([[(lo, hi)[a][0], (lo, hi)[b][1], (lo, hi)[c][2]] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+    corners = np.array(
+        [[(lo, hi)[a][0], (lo, hi)[b][1], (lo, hi)[c][2]] for a in (0, 1) for b in (0, 1) for c in (0, 1)]
+    )
     edges = [(i, j) for i in range(8) for j in range(i + 1, 8) if bin(i ^ j).count("1") == 1]
     return [[corners[i].tolist(), corners[j].tolist()] for i, j in edges]
 
@@ -189,30 +200,57 @@ def _talos_scene(rec: rr.RecordingStream) -> None:
     from lerobot_efm.envs.talos_kitchen import control, scene
 
     (tx, ty), (hx, hy), z = scene.TABLE_CENTER, scene.TABLE_HALF, scene.TABLE_TOP
-    table = [[tx - hx, ty - hy, z], [tx + hx, ty - hy, z], [tx + hx, ty + hy, z], [tx - hx, ty + hy, z], [tx - hx, ty - hy, z]]
+    table = [
+        [tx - hx, ty - hy, z],
+        [tx + hx, ty - hy, z],
+        [tx + hx, ty + hy, z],
+        [tx - hx, ty + hy, z],
+        [tx - hx, ty - hy, z],
+    ]
     x0, y0, y1 = scene.CAB_X0, scene.CAB_Y0, scene.CAB_Y1
     cabinet = [[x0, y0, 0.0], [x0, y1, 0.0], [x0, y1, 1.25], [x0, y0, 1.25], [x0, y0, 0.0]]
-    hinge = [[scene.DOOR_HINGE[0], scene.DOOR_HINGE[1], 0.92], [scene.DOOR_HINGE[0], scene.DOOR_HINGE[1], 1.25]]
+    hinge = [
+        [scene.DOOR_HINGE[0], scene.DOOR_HINGE[1], 0.92],
+        [scene.DOOR_HINGE[0], scene.DOOR_HINGE[1], 1.25],
+    ]
     rec.log("scene/table", rr.LineStrips3D([table], colors=[(150, 110, 60)], radii=0.006), static=True)
-    rec.log("scene/cabinet", rr.LineStrips3D([cabinet, hinge], colors=[(110, 110, 110)], radii=0.005), static=True)
-    rec.log("scene/workspace", rr.LineStrips3D(_box_outline(control.WORKSPACE_LOW, control.WORKSPACE_HIGH),
-                                               colors=[(200, 200, 200)], radii=0.002), static=True)
-    rec.log("scene/robot_base", rr.Points3D([[0.0, 0.0, scene.BASE_HEIGHT]], colors=[(90, 90, 90)], radii=0.05,
-                                            labels=["Talos base"]), static=True)
+    rec.log(
+        "scene/cabinet", rr.LineStrips3D([cabinet, hinge], colors=[(110, 110, 110)], radii=0.005), static=True
+    )
+    rec.log(
+        "scene/workspace",
+        rr.LineStrips3D(
+            _box_outline(control.WORKSPACE_LOW, control.WORKSPACE_HIGH), colors=[(200, 200, 200)], radii=0.002
+        ),
+        static=True,
+    )
+    rec.log(
+        "scene/robot_base",
+        rr.Points3D(
+            [[0.0, 0.0, scene.BASE_HEIGHT]], colors=[(90, 90, 90)], radii=0.05, labels=["Talos base"]
+        ),
+        static=True,
+    )
 
 
 def _talos_kitchen_viz() -> EnvViz:
     from lerobot_efm.envs.talos_kitchen.env import ENV_STATE_NAMES, STATE_NAMES
 
     i = _talos_layout()
-    viz = hand_points(commanded=slice(i["cmd"], i["cmd"] + 3), measured=slice(i["measured"], i["measured"] + 3),
-                      action=slice(0, 3))  # actions: position (3) + rot6d (6) + gripper (1)
+    viz = hand_points(
+        commanded=slice(i["cmd"], i["cmd"] + 3),
+        measured=slice(i["measured"], i["measured"] + 3),
+        action=slice(0, 3),
+    )  # actions: position (3) + rot6d (6) + gripper (1)
     viz.scene = _talos_scene
     viz.object_points = {ENV_STATE_KEY: _talos_objects}
     viz.object_series = {ENV_STATE_KEY: _talos_series}
     viz.object_series_title = "door (rad), tray, pot (m); thin: goal"
     viz.dim_names = {STATE_KEY: STATE_NAMES, ENV_STATE_KEY: ENV_STATE_NAMES}
-    viz.eye = ((-0.55, -1.25, 1.75), (0.45, 0.1, 0.95))  # behind the robot's right shoulder, facing the kitchen
+    viz.eye = (
+        (-0.55, -1.25, 1.75),
+        (0.45, 0.1, 0.95),
+    )  # behind the robot's right shoulder, facing the kitchen
     return viz
 
 
@@ -323,8 +361,16 @@ class RolloutLogger:
     finally ``end_episode(length, success)``. ``blueprint()`` gives the default layout.
     """
 
-    def __init__(self, rec: rr.RecordingStream, env_type: str | None, fps: float, policy=None, preprocessor=None,
-                 postprocessor=None, env_viz: EnvViz | None = None):
+    def __init__(
+        self,
+        rec: rr.RecordingStream,
+        env_type: str | None,
+        fps: float,
+        policy=None,
+        preprocessor=None,
+        postprocessor=None,
+        env_viz: EnvViz | None = None,
+    ):
         self.rec, self.fps = rec, float(fps)
         self.policy, self.preprocessor, self.postprocessor = policy, preprocessor, postprocessor
         self.viz = env_viz or get_env_viz(env_type)
@@ -353,12 +399,19 @@ class RolloutLogger:
 
     def _scalars(self, path: str, values, names: list[str] | None = None, color=None) -> None:
         values = np.atleast_1d(np.asarray(values, dtype=np.float64)).reshape(-1)
-        self._series_names(path, names or ([path.rsplit("/", 1)[-1]] if len(values) == 1 else [f"{i}" for i in range(len(values))]), color)
+        self._series_names(
+            path,
+            names
+            or ([path.rsplit("/", 1)[-1]] if len(values) == 1 else [f"{i}" for i in range(len(values))]),
+            color,
+        )
         self.rec.log(path, rr.Scalars(values))
 
     # --- episode -----------------------------------------------------------------------------------
     def begin_episode(self, index: int, task: str | None = None, seed: int | None = None) -> None:
-        self.episodes.append({"index": int(index), "path": {}, "length": None, "success": None, "task": task, "seed": seed})
+        self.episodes.append(
+            {"index": int(index), "path": {}, "length": None, "success": None, "task": task, "seed": seed}
+        )
         self.set_step(0)
         self.rec.log(f"{self.ep}/events", rr.TextLog(f"episode {index} starts (task={task!r}, seed={seed})"))
 
@@ -373,7 +426,7 @@ class RolloutLogger:
         """Legend of the series of observation ``key`` (its goal mirror: the observation's names, 'goal ' first)."""
         base, prefix = key, ""
         if key.startswith(GOAL_PREFIX):
-            base, prefix = "observation." + key[len(GOAL_PREFIX):], "goal "
+            base, prefix = "observation." + key[len(GOAL_PREFIX) :], "goal "
         names = self.viz.dim_names.get(base)
         if names is None or len(names) != size:
             return [f"{prefix}{i}" for i in range(size)]
@@ -385,12 +438,20 @@ class RolloutLogger:
         for j, (name, p) in enumerate(points.items()):
             color = POINT_COLORS[(color_offset + j) % len(POINT_COLORS)]
             paths.setdefault(name, []).append(np.asarray(p, np.float32).reshape(3))
-            self.rec.log(f"{self.ep}/world/{name}", rr.Points3D([paths[name][-1]], colors=[color], radii=0.03))
-            self.rec.log(f"{self.ep}/world/{name}_path", rr.LineStrips3D([np.stack(paths[name])], colors=[color], radii=0.006))
+            self.rec.log(
+                f"{self.ep}/world/{name}", rr.Points3D([paths[name][-1]], colors=[color], radii=0.03)
+            )
+            self.rec.log(
+                f"{self.ep}/world/{name}_path",
+                rr.LineStrips3D([np.stack(paths[name])], colors=[color], radii=0.006),
+            )
 
     def _log_goal_points(self, points: dict[str, np.ndarray]) -> None:
         for name, p in points.items():
-            self.rec.log(f"{self.ep}/world/goal_{name}", rr.Points3D([np.asarray(p).reshape(3)], colors=[GOAL_COLOR], radii=0.04))
+            self.rec.log(
+                f"{self.ep}/world/goal_{name}",
+                rr.Points3D([np.asarray(p).reshape(3)], colors=[GOAL_COLOR], radii=0.04),
+            )
 
     def _log_object_series(self, values: dict[str, float], goal: bool) -> None:
         """Object states (door angle...) under ``ep/objects/<name>``; the goal's, thin, under ``goal_<name>``."""
@@ -399,8 +460,15 @@ class RolloutLogger:
             if path not in self._static_done:
                 self._static_done.add(path)
                 color = POINT_COLORS[(OBJECT_COLOR_OFFSET + j) % len(POINT_COLORS)]
-                self.rec.log(path, rr.SeriesLines(names=[f"goal {name}" if goal else name], colors=[color],
-                                                  widths=[1.0 if goal else 2.5]), static=True)
+                self.rec.log(
+                    path,
+                    rr.SeriesLines(
+                        names=[f"goal {name}" if goal else name],
+                        colors=[color],
+                        widths=[1.0 if goal else 2.5],
+                    ),
+                    static=True,
+                )
             self.rec.log(path, rr.Scalars([float(v)]))
 
     def log_observation(self, step: int, observation: dict) -> None:
@@ -411,13 +479,13 @@ class RolloutLogger:
             if not isinstance(value, (torch.Tensor, np.ndarray)):
                 continue
             if key.startswith(GOAL_IMAGE_PREFIX):
-                cam = key[len(GOAL_IMAGE_PREFIX):]
+                cam = key[len(GOAL_IMAGE_PREFIX) :]
                 img = to_hwc_uint8(value)
                 if img is not None:
                     self.goal_cameras.add(cam)
                     self.rec.log(f"{ep}/goal/{cam}", rr.Image(img))
             elif key.startswith(IMAGE_PREFIX):
-                cam = key[len(IMAGE_PREFIX):]
+                cam = key[len(IMAGE_PREFIX) :]
                 img = to_hwc_uint8(value)
                 if img is not None:
                     self.cameras.add(cam)
@@ -425,21 +493,25 @@ class RolloutLogger:
             elif key.startswith("observation.") and to_numpy(value).ndim <= 2:
                 vec = vectors[key] = to_numpy(value).reshape(-1)
                 if key.startswith(GOAL_PREFIX):
-                    self._scalars(f"{ep}/goal_obs/{key[len(GOAL_PREFIX):]}", vec, self._dim_names(key, len(vec)))
+                    self._scalars(
+                        f"{ep}/goal_obs/{key[len(GOAL_PREFIX) :]}", vec, self._dim_names(key, len(vec))
+                    )
                 else:
-                    self._scalars(f"{ep}/obs/{key[len('observation.'):]}", vec, self._dim_names(key, len(vec)))
+                    self._scalars(
+                        f"{ep}/obs/{key[len('observation.') :]}", vec, self._dim_names(key, len(vec))
+                    )
         if STATE_KEY in vectors:
             self._log_points(self.viz.state_points(vectors[STATE_KEY]))
         if GOAL_STATE_KEY in vectors:
             self._log_goal_points(self.viz.state_points(vectors[GOAL_STATE_KEY]))
         for key, points in self.viz.object_points.items():
-            goal_key = GOAL_PREFIX + key[len("observation."):]
+            goal_key = GOAL_PREFIX + key[len("observation.") :]
             if key in vectors:
                 self._log_points(points(vectors[key]), OBJECT_COLOR_OFFSET)
             if goal_key in vectors:
                 self._log_goal_points(points(vectors[goal_key]))
         for key, series in self.viz.object_series.items():
-            goal_key = GOAL_PREFIX + key[len("observation."):]
+            goal_key = GOAL_PREFIX + key[len("observation.") :]
             if key in vectors:
                 self._log_object_series(series(vectors[key]), goal=False)
             if goal_key in vectors:
@@ -460,7 +532,9 @@ class RolloutLogger:
             chunk = unnormalize_actions(self.postprocessor, prediction["action"][:1])[0]  # (L_a, A)
             pts = self.viz.action_points(chunk) if self.viz.action_points else None
             if pts is not None:
-                self.rec.log(f"{ep}/world/action_chunk", rr.LineStrips3D([pts], colors=[CHUNK_COLOR], radii=0.008))
+                self.rec.log(
+                    f"{ep}/world/action_chunk", rr.LineStrips3D([pts], colors=[CHUNK_COLOR], radii=0.008)
+                )
             names = [f"a{i}" for i in range(chunk.shape[-1])]
             path = f"{ep}/action_chunk/r{step:04d}"
             self._series_names(path, [f"{n} @{step}" for n in names])
@@ -482,22 +556,31 @@ class RolloutLogger:
             states = latent_to_states(self.policy, self.preprocessor, prediction["obs_plan"][:1])
             if states is not None and STATE_KEY in states:
                 strips = list(self.viz.state_points(states[STATE_KEY][0]).values())
-                self.rec.log(f"{ep}/world/obs_plan", rr.LineStrips3D(strips, colors=[PLAN_COLOR] * len(strips), radii=0.01))
+                self.rec.log(
+                    f"{ep}/world/obs_plan",
+                    rr.LineStrips3D(strips, colors=[PLAN_COLOR] * len(strips), radii=0.01),
+                )
         candidates = None
         if "candidate_obs_plans" in prediction:
             states = latent_to_states(self.policy, self.preprocessor, prediction["candidate_obs_plans"][:1])
             if states is not None and STATE_KEY in states:
                 candidates = list(self.viz.state_points(states[STATE_KEY][0]).values())[0]  # (N, L_o, 3)
         elif "candidate_actions" in prediction and self.viz.action_points:
-            raw = unnormalize_actions(self.postprocessor, prediction["candidate_actions"][:1])[0]  # (N, L_a, A)
+            raw = unnormalize_actions(self.postprocessor, prediction["candidate_actions"][:1])[
+                0
+            ]  # (N, L_a, A)
             candidates = self.viz.action_points(raw)
         if candidates is not None:
             n = len(candidates)
             colors = [CHOSEN_COLOR if i == chosen else CANDIDATE_COLOR for i in range(n)]
             radii = [0.012 if i == chosen else 0.003 for i in range(n)]
             labels = [f"{i}: {scores[i]:.1f}" if scores is not None else str(i) for i in range(n)]
-            self.rec.log(f"{ep}/world/candidates", rr.LineStrips3D(list(candidates), colors=colors, radii=radii, labels=labels,
-                                                                   show_labels=False))
+            self.rec.log(
+                f"{ep}/world/candidates",
+                rr.LineStrips3D(
+                    list(candidates), colors=colors, radii=radii, labels=labels, show_labels=False
+                ),
+            )
 
     def log_outcome(self, step: int, reward: float, success: bool, info: dict | None = None) -> None:
         """Reward and success of the transition taken at ``step``."""
@@ -522,40 +605,80 @@ class RolloutLogger:
                 self.set_step(t)
                 self.rec.log(f"{ep}/distance/true_remaining", rr.Scalars([float(length - t)]))
         self.set_step(length)
-        self.rec.log(f"{ep}/events", rr.TextLog(f"episode {self.episodes[-1]['index']} ends after {length} steps, "
-                                                f"success={bool(success)}", level=rr.TextLogLevel.INFO))
+        self.rec.log(
+            f"{ep}/events",
+            rr.TextLog(
+                f"episode {self.episodes[-1]['index']} ends after {length} steps, success={bool(success)}",
+                level=rr.TextLogLevel.INFO,
+            ),
+        )
 
     # --- layout ------------------------------------------------------------------------------------
     def blueprint(self, episodes: list[int] | None = None) -> rrb.Blueprint:
         """One tab per episode (``episodes``: indices; default the logged ones): cameras and goal images | the 3-D
         world | plots, events below. The side panels start collapsed and the time cursor at the end of the
         recording (the whole trajectory shows)."""
-        eye = None if self.viz.eye is None else rrb.EyeControls3D(position=self.viz.eye[0], look_target=self.viz.eye[1],
-                                                                  eye_up=(0.0, 0.0, 1.0))
+        eye = (
+            None
+            if self.viz.eye is None
+            else rrb.EyeControls3D(
+                position=self.viz.eye[0], look_target=self.viz.eye[1], eye_up=(0.0, 0.0, 1.0)
+            )
+        )
         tabs = []
         for index in [e["index"] for e in self.episodes] if episodes is None else episodes:
             ep = f"episode_{index}"
             images = [rrb.Spatial2DView(origin=f"/{ep}/camera/{c}", name=c) for c in sorted(self.cameras)]
-            images += [rrb.Spatial2DView(origin=f"/{ep}/goal/{c}", name=f"goal {c}") for c in sorted(self.goal_cameras)]
-            world = rrb.Spatial3DView(origin="/", contents=["/scene/**", f"/{ep}/world/**"], name="world", eye_controls=eye)
+            images += [
+                rrb.Spatial2DView(origin=f"/{ep}/goal/{c}", name=f"goal {c}")
+                for c in sorted(self.goal_cameras)
+            ]
+            world = rrb.Spatial3DView(
+                origin="/", contents=["/scene/**", f"/{ep}/world/**"], name="world", eye_controls=eye
+            )
             plots = [
                 rrb.TimeSeriesView(origin=f"/{ep}/distance", name="distance to goal (steps)"),
-                rrb.TimeSeriesView(origin=f"/{ep}", contents=[f"/{ep}/action", f"/{ep}/action_chunk/**"], name="actions & chunks",
-                                   plot_legend=rrb.PlotLegend(visible=False)),  # one series per dim and chunk: too long
+                rrb.TimeSeriesView(
+                    origin=f"/{ep}",
+                    contents=[f"/{ep}/action", f"/{ep}/action_chunk/**"],
+                    name="actions & chunks",
+                    plot_legend=rrb.PlotLegend(visible=False),
+                ),  # one series per dim and chunk: too long
             ]
             if self.viz.object_series:
                 plots.append(rrb.TimeSeriesView(origin=f"/{ep}/objects", name=self.viz.object_series_title))
-            plots.append(rrb.TimeSeriesView(origin=f"/{ep}", contents=[f"/{ep}/obs/**", f"/{ep}/goal_obs/**", f"/{ep}/reward",
-                                                                      f"/{ep}/success", f"/{ep}/info/**"],
-                                            name="state, reward, success", plot_legend=rrb.PlotLegend(visible=False)))
+            plots.append(
+                rrb.TimeSeriesView(
+                    origin=f"/{ep}",
+                    contents=[
+                        f"/{ep}/obs/**",
+                        f"/{ep}/goal_obs/**",
+                        f"/{ep}/reward",
+                        f"/{ep}/success",
+                        f"/{ep}/info/**",
+                    ],
+                    name="state, reward, success",
+                    plot_legend=rrb.PlotLegend(visible=False),
+                )
+            )
             left = [rrb.Vertical(*images)] if images else []
             columns = [*left, world, rrb.Vertical(*plots)]
             shares = ([1] if left else []) + [2, 1.4]
-            tabs.append(rrb.Vertical(rrb.Horizontal(*columns, column_shares=shares),
-                                     rrb.TextLogView(origin=f"/{ep}/events", name="events"), row_shares=[6, 1], name=ep))
+            tabs.append(
+                rrb.Vertical(
+                    rrb.Horizontal(*columns, column_shares=shares),
+                    rrb.TextLogView(origin=f"/{ep}/events", name="events"),
+                    row_shares=[6, 1],
+                    name=ep,
+                )
+            )
         root = rrb.Tabs(*tabs) if len(tabs) > 1 else (tabs[0] if tabs else rrb.Spatial3DView(origin="/"))
-        return rrb.Blueprint(root, rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
-                             rrb.TimePanel(timeline="step", state="collapsed", play_state="following"))
+        return rrb.Blueprint(
+            root,
+            rrb.BlueprintPanel(state="collapsed"),
+            rrb.SelectionPanel(state="collapsed"),
+            rrb.TimePanel(timeline="step", state="collapsed", play_state="following"),
+        )
 
 
 # --------------------------------------------------------------------------------------------------

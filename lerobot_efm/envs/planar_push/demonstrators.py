@@ -29,10 +29,28 @@ from pathlib import Path
 import numpy as np
 
 from .maze import (
-    ARENA, CORNER, EFFECTOR_CLEARANCE, EFFECTOR_RADIUS, GRID_COORDS, GRID_H, MAZE_CELLS, OBJECT_CLEARANCE,
+    ARENA,
+    CORNER,
+    EFFECTOR_CLEARANCE,
+    EFFECTOR_RADIUS,
+    GRID_COORDS,
+    GRID_H,
+    MAZE_CELLS,
+    OBJECT_CLEARANCE,
     OBJECT_RADIUS,
-    REGION_NAMES, distance_field, free_disc_cells, free_mask, grid_index, grid_path, grid_point, inside_region,
-    lookahead, maze_cell_of, nearest_free, segment_clear, wall_distance,
+    REGION_NAMES,
+    distance_field,
+    free_disc_cells,
+    free_mask,
+    grid_index,
+    grid_path,
+    grid_point,
+    inside_region,
+    lookahead,
+    maze_cell_of,
+    nearest_free,
+    segment_clear,
+    wall_distance,
 )
 
 PUSH_GAP = OBJECT_RADIUS + EFFECTOR_RADIUS  # centre distance at contact
@@ -125,19 +143,26 @@ class Pusher:
     ``region`` confines disc paths (and targets sampled by :meth:`sample_disc`) to one maze region.
     """
 
-    def __init__(self, region: int | None = None, region_margin: float = -REGION_OVERLAP,
-                 lookahead: float = PUSH_LOOKAHEAD):
+    def __init__(
+        self,
+        region: int | None = None,
+        region_margin: float = -REGION_OVERLAP,
+        lookahead: float = PUSH_LOOKAHEAD,
+    ):
         self.region, self.lookahead = region, float(lookahead)
         self.obj_free = free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE, region, region_margin)
         self.start_free = free_mask(OBJECT_RADIUS + START_MARGIN, region, region_margin + 0.04)
         self.eff_free = free_mask(EFFECTOR_RADIUS + 0.01)
         # wall-adjacent disc targets: free for the disc, but not WALL_BAND further from the walls
-        self.wall_nodes = np.argwhere(self.obj_free & ~free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE + WALL_BAND))
+        self.wall_nodes = np.argwhere(
+            self.obj_free & ~free_mask(OBJECT_RADIUS + OBJECT_CLEARANCE + WALL_BAND)
+        )
         # the maze corners a disc of this region can stop in (planned paths keep OBJECT_CLEARANCE off the walls,
         # a corner only CORNER's gap: its nearest free node is that much further on each axis)
         reach = GRID_H + np.sqrt(2) * (CORNER - (ARENA - OBJECT_RADIUS - OBJECT_CLEARANCE))
-        self.corners = [c for c in CORNERS
-                        if np.linalg.norm(grid_point(*nearest_free(self.obj_free, c)) - c) < reach]
+        self.corners = [
+            c for c in CORNERS if np.linalg.norm(grid_point(*nearest_free(self.obj_free, c)) - c) < reach
+        ]
         self._obj_fields: dict[tuple[int, int], np.ndarray] = {}
         self._eff_plan: tuple | None = None
 
@@ -160,10 +185,17 @@ class Pusher:
         if np.abs(corner).min() < CORNER - 1e-9:
             return None
         inward = -np.sign(corner)
-        vias = [corner + inward * axis * CORNER_SLIDE for axis in (np.array([1.0, 0.0]), np.array([0.0, 1.0]))]
+        vias = [
+            corner + inward * axis * CORNER_SLIDE for axis in (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+        ]
         fits = OBJECT_RADIUS + 0.004  # on the wall's line: as close to the wall as the corner itself
-        vias = [v for v in vias if wall_distance(v) >= fits and segment_clear(v, corner, fits)
-                and (self.region is None or inside_region(v, self.region, -REGION_OVERLAP))]
+        vias = [
+            v
+            for v in vias
+            if wall_distance(v) >= fits
+            and segment_clear(v, corner, fits)
+            and (self.region is None or inside_region(v, self.region, -REGION_OVERLAP))
+        ]
         return vias[rng.integers(len(vias))].copy() if vias else None
 
     def wall_slide(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray] | None:
@@ -173,7 +205,10 @@ class Pusher:
             return None
         corner = self.corners[rng.integers(len(self.corners))]
         inward = -np.sign(corner) * np.eye(2)[rng.integers(2)]
-        start, stop = corner + inward * rng.uniform(*WALL_SLIDE_FROM), corner + inward * rng.uniform(*WALL_SLIDE_TO)
+        start, stop = (
+            corner + inward * rng.uniform(*WALL_SLIDE_FROM),
+            corner + inward * rng.uniform(*WALL_SLIDE_TO),
+        )
         fits = OBJECT_RADIUS + 0.004
         if wall_distance(start) < fits or not segment_clear(start, stop, fits):
             return None
@@ -181,14 +216,19 @@ class Pusher:
             return None
         return start, stop
 
-    def sample_effector(self, rng: np.random.Generator, obj: np.ndarray, near: float | None = None) -> np.ndarray:
+    def sample_effector(
+        self, rng: np.random.Generator, obj: np.ndarray, near: float | None = None
+    ) -> np.ndarray:
         """A free effector position clear of the disc (within ``near`` of it if given)."""
         for _ in range(1000):
             if near is None:
                 p = rng.uniform(-ARENA, ARENA, 2)
             else:
                 p = obj + _rot(np.array([rng.uniform(PUSH_GAP + 0.04, near), 0.0]), rng.uniform(0, 360))
-            if wall_distance(p) >= EFFECTOR_RADIUS + EFFECTOR_CLEARANCE and np.linalg.norm(p - obj) > AVOID + 0.02:
+            if (
+                wall_distance(p) >= EFFECTOR_RADIUS + EFFECTOR_CLEARANCE
+                and np.linalg.norm(p - obj) > AVOID + 0.02
+            ):
                 return p
         raise RuntimeError(f"no free effector position around disc {obj.tolist()}")
 
@@ -224,7 +264,9 @@ class Pusher:
             return target.copy()
         key = (grid_index(obj), grid_index(target))
         if self._eff_plan is None or self._eff_plan[0] != key:
-            d = np.linalg.norm(np.stack(np.meshgrid(GRID_COORDS, GRID_COORDS, indexing="ij"), -1) - obj, axis=-1)
+            d = np.linalg.norm(
+                np.stack(np.meshgrid(GRID_COORDS, GRID_COORDS, indexing="ij"), -1) - obj, axis=-1
+            )
             free = self.eff_free & (d > AVOID)
             try:  # only the hand's side of the disc and walls: a target in a pocket behind the disc is approached
                 free &= np.isfinite(distance_field(free, eff))  # as close as it gets (else no path at all)
@@ -238,8 +280,14 @@ class Pusher:
             return eff + _unit(eff - obj) * 0.1
         return lookahead(path, eff, EFFECTOR_RADIUS + 0.005, 0.4, obj, AVOID)
 
-    def push(self, state: np.ndarray, target: np.ndarray, final: bool, lead: float = MAX_LEAD,
-             direction: np.ndarray | None = None) -> np.ndarray:
+    def push(
+        self,
+        state: np.ndarray,
+        target: np.ndarray,
+        final: bool,
+        lead: float = MAX_LEAD,
+        direction: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Command that moves the disc toward ``target`` (stopping on it when ``final``); a given ``direction``
         is pushed along as it is (a straight slide, e.g. along a wall)."""
         eff, obj = state[:2], state[2:]
@@ -289,10 +337,25 @@ class ExpertReachGoal:
     goals name the hand too); ``done`` once both rest there. With ``goal`` (4-D [eff, obj])
     it keeps the env's current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
 
-    def __init__(self, env, rng: np.random.Generator, goal=None, noise: float = 0.003, min_path: float = 0.8,
-                 tolerance: float = 0.025, rest: tuple[int, int] = EXPERT_REST,
-                 cursor_reach: float | None = CURSOR_REACH, corner_share: float = EXPERT_CORNER_SHARE):
-        self.env, self.rng, self.noise, self.min_path, self.tol = env, rng, float(noise), float(min_path), tolerance
+    def __init__(
+        self,
+        env,
+        rng: np.random.Generator,
+        goal=None,
+        noise: float = 0.003,
+        min_path: float = 0.8,
+        tolerance: float = 0.025,
+        rest: tuple[int, int] = EXPERT_REST,
+        cursor_reach: float | None = CURSOR_REACH,
+        corner_share: float = EXPERT_CORNER_SHARE,
+    ):
+        self.env, self.rng, self.noise, self.min_path, self.tol = (
+            env,
+            rng,
+            float(noise),
+            float(min_path),
+            tolerance,
+        )
         if not 0.0 <= corner_share <= 1.0:
             raise ValueError(f"corner_share must be in [0, 1], got {corner_share!r}")
         self.corner_share = float(corner_share)
@@ -324,7 +387,9 @@ class ExpertReachGoal:
                 break
         self.target = far[self.rng.integers(len(far))].copy()
         self._via = self.pusher.corner_via(self.target, self.rng)
-        if not to_corner:  # an open-space goal names the hand too: placed beside the resting disc, as the eval's
+        if (
+            not to_corner
+        ):  # an open-space goal names the hand too: placed beside the resting disc, as the eval's
             self.effector_goal = self.pusher.sample_effector(self.rng, self.target, near=OPEN_GOAL_HAND)
         eff = self.pusher.sample_effector(self.rng, obj, near=0.6)
         self.env.set_state(np.concatenate([eff, obj]))
@@ -349,7 +414,10 @@ class ExpertReachGoal:
         elif self.effector_goal is not None and np.linalg.norm(eff - self.effector_goal) > self.tol:
             cmd = self.pusher.move_effector(eff, obj, self.effector_goal)
         else:
-            self._rest_left, self._rest_at = int(self.rng.integers(self.rest[0], self.rest[1] + 1)), eff.copy()
+            self._rest_left, self._rest_at = (
+                int(self.rng.integers(self.rest[0], self.rest[1] + 1)),
+                eff.copy(),
+            )
             return self.act(obs)
         return self._command(eff, cmd)
 
@@ -384,12 +452,24 @@ class PlayFullSpace:
 
     region: int | None = None
 
-    def __init__(self, env, rng: np.random.Generator, noise: float = PLAY_NOISE, leg_budget: int = 250,
-                 cursor_reach: float | None = CURSOR_REACH, pause_share: float = 0.12, effector_share: float = 0.18,
-                 rest_after_disc: float = PLAY_REST_AFTER_DISC, push_lookahead: float = PUSH_LOOKAHEAD,
-                 min_lead: float = PLAY_MIN_LEAD, effector_near: float | None = PLAY_EFFECTOR_NEAR,
-                 corner_after: int = PLAY_CORNER_AFTER, corner_episodes: float = PLAY_CORNER_EPISODES,
-                 wall_slides: float = PLAY_WALL_SLIDES, **_):
+    def __init__(
+        self,
+        env,
+        rng: np.random.Generator,
+        noise: float = PLAY_NOISE,
+        leg_budget: int = 250,
+        cursor_reach: float | None = CURSOR_REACH,
+        pause_share: float = 0.12,
+        effector_share: float = 0.18,
+        rest_after_disc: float = PLAY_REST_AFTER_DISC,
+        push_lookahead: float = PUSH_LOOKAHEAD,
+        min_lead: float = PLAY_MIN_LEAD,
+        effector_near: float | None = PLAY_EFFECTOR_NEAR,
+        corner_after: int = PLAY_CORNER_AFTER,
+        corner_episodes: float = PLAY_CORNER_EPISODES,
+        wall_slides: float = PLAY_WALL_SLIDES,
+        **_,
+    ):
         self.env, self.rng, self.noise, self.leg_budget = env, rng, float(noise), int(leg_budget)
         self.cursor_reach = cursor_reach
         self.pause_share, self.effector_share = float(pause_share), float(effector_share)
@@ -438,7 +518,9 @@ class PlayFullSpace:
             self._queue = [self._pause()]
         elif r < self.pause_share + self.effector_share:
             self._queue = [Leg("effector", self._random_effector_point(s[2:]))]
-        elif self._closing_frame is not None and self._frame >= self._closing_frame:  # into a corner: rest, end
+        elif (
+            self._closing_frame is not None and self._frame >= self._closing_frame
+        ):  # into a corner: rest, end
             target = self.pusher.corners[self.rng.integers(len(self.pusher.corners))].copy()
             via = self.pusher.corner_via(target, self.rng)
             self._queue = [Leg("disc_stop", target, slide=via is not None), self._pause(last=True)]
@@ -446,7 +528,9 @@ class PlayFullSpace:
                 self._queue.insert(0, Leg("disc_via", via))
             self._closing_frame = None
         elif self.rng.random() < PLAY_WALL_TARGETS:  # against a wall, stopping there
-            slides = self.wall_slides > 0 and self.rng.random() < self.wall_slides  # (0: the old random stream)
+            slides = (
+                self.wall_slides > 0 and self.rng.random() < self.wall_slides
+            )  # (0: the old random stream)
             slide = self.pusher.wall_slide(self.rng) if slides else None
             if slide is None:
                 self._queue = [Leg("disc_stop", self.pusher.sample_wall_disc(self.rng))]
@@ -472,7 +556,9 @@ class PlayFullSpace:
         moved = np.abs(s - self._last_state).max() > STALL_MOVE
         self._stalled, self._last_state = 0 if moved else self._stalled + 1, s.copy()
         if self._stalled >= STALL_FRAMES and self._queue and self._queue[0].kind != "pause":
-            self._queue.pop(0)  # nothing moves: the leg cannot be done from here (e.g. no room behind the disc)
+            self._queue.pop(
+                0
+            )  # nothing moves: the leg cannot be done from here (e.g. no room behind the disc)
             self._stalled, self._budget = 0, self.leg_budget
         while True:
             if not self._queue:
@@ -502,8 +588,13 @@ class PlayFullSpace:
                     leg.direction = slide_direction(obj, leg.target)
                 # a slide into a corner needs no braking: the walls stop the disc, against both of them
                 into_corner = leg.slide and np.abs(leg.target).min() >= CORNER - 1e-9
-                cmd = self.pusher.push(s, leg.target, final=leg.kind != "disc" and not into_corner, lead=self._lead,
-                                       direction=leg.direction)
+                cmd = self.pusher.push(
+                    s,
+                    leg.target,
+                    final=leg.kind != "disc" and not into_corner,
+                    lead=self._lead,
+                    direction=leg.direction,
+                )
             break
         return _send(eff, cmd, self.cursor_reach, self.noise, self.rng)
 
@@ -561,7 +652,10 @@ def planar_push_features(with_images: bool = False, image_size: int = 96) -> dic
     }
     if with_images:
         feats["observation.images.top"] = {
-            "dtype": "video", "shape": (image_size, image_size, 3), "names": ["height", "width", "channels"]}
+            "dtype": "video",
+            "shape": (image_size, image_size, 3),
+            "names": ["height", "width", "channels"],
+        }
     return feats
 
 
@@ -620,16 +714,26 @@ def evaluate_expert(max_steps: int = 600) -> dict[str, float]:
     return {"pc_success": 100.0 * float(np.mean(successes)), "pc_closed": 100.0 * float(np.mean(closed))}
 
 
-def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int = 0, with_images: bool = False,
-                               repo_id: str | None = None, image_size: int = 96, max_episode_frames: int | None = None,
-                               verbose: bool = False, operator_options: dict | None = None):
+def record_planar_push_dataset(
+    behaviour: str,
+    root,
+    num_frames: int,
+    seed: int = 0,
+    with_images: bool = False,
+    repo_id: str | None = None,
+    image_size: int = 96,
+    max_episode_frames: int | None = None,
+    verbose: bool = False,
+    operator_options: dict | None = None,
+):
     """Record episodes of ``behaviour`` (expert | full | partitioned | hand) until about ``num_frames`` frames into a
     new LeRobot v3 dataset at ``root`` (must not exist). Expert episodes that do not reach their corner are
     dropped. ``operator_options`` are keyword arguments of the operator class (e.g. ``noise``). Returns the
     dataset reopened read-only."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
-    from lerobot_efm.recording import finalizing
     from lerobot.utils.utils import SuppressProgressBars
+
+    from lerobot_efm.recording import finalizing
 
     from .env import FPS, PlanarPushEnv
 
@@ -641,12 +745,21 @@ def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int 
     max_len = int(max_episode_frames or max_len)
     repo_id = repo_id or f"local/planar_push_{behaviour}"
     rng = np.random.default_rng(seed)
-    env = PlanarPushEnv(task="pair0", obs_type="pixels_state" if with_images else "state", image_size=image_size,
-                        terminate_on_success=False)
+    env = PlanarPushEnv(
+        task="pair0",
+        obs_type="pixels_state" if with_images else "state",
+        image_size=image_size,
+        terminate_on_success=False,
+    )
     env.reset(seed=seed)
     operator = cls(env, rng, **(operator_options or {}))
-    ds = LeRobotDataset.create(repo_id, fps=FPS, features=planar_push_features(with_images, image_size), root=root,
-                               use_videos=with_images)
+    ds = LeRobotDataset.create(
+        repo_id,
+        fps=FPS,
+        features=planar_push_features(with_images, image_size),
+        root=root,
+        use_videos=with_images,
+    )
     total, dropped, t0 = 0, 0, time.perf_counter()
     with finalizing(ds), closing(env):
         while total < num_frames:
@@ -663,8 +776,11 @@ def record_planar_push_dataset(behaviour: str, root, num_frames: int, seed: int 
                 ds.save_episode()
             total += len(states)
             if verbose:
-                print(f"{behaviour}: {total}/{num_frames} frames, {ds.num_episodes} episodes, {dropped} dropped, "
-                      f"{total / (time.perf_counter() - t0):.0f} frames/s", flush=True)
+                print(
+                    f"{behaviour}: {total}/{num_frames} frames, {ds.num_episodes} episodes, {dropped} dropped, "
+                    f"{total / (time.perf_counter() - t0):.0f} frames/s",
+                    flush=True,
+                )
     return LeRobotDataset(repo_id, root=root)
 
 
@@ -673,15 +789,20 @@ def parse_options(cls, items: list[str]) -> dict:
     ``cls.__init__``."""
     import inspect
 
-    allowed = {n: p.default for c in cls.__mro__[:-1] if "__init__" in vars(c)  # [:-1]: not object
-               for n, p in inspect.signature(c.__init__).parameters.items()
-               if n not in ("self", "env", "rng") and p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)}
+    allowed = {
+        n: p.default
+        for c in cls.__mro__[:-1]
+        if "__init__" in vars(c)  # [:-1]: not object
+        for n, p in inspect.signature(c.__init__).parameters.items()
+        if n not in ("self", "env", "rng") and p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)
+    }
     options = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or name not in allowed:
-            raise ValueError(f"--option {item!r}: expected NAME=VALUE with NAME one of {sorted(allowed)} "
-                             f"({cls.__name__})")
+            raise ValueError(
+                f"--option {item!r}: expected NAME=VALUE with NAME one of {sorted(allowed)} ({cls.__name__})"
+            )
         try:
             number = None if value.lower() == "none" else float(value)
             options[name] = int(number) if isinstance(allowed[name], int) and number is not None else number
@@ -691,7 +812,9 @@ def parse_options(cls, items: list[str]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description="Record scripted planar push demonstrations (LeRobot v3 dataset).")
+    ap = argparse.ArgumentParser(
+        description="Record scripted planar push demonstrations (LeRobot v3 dataset)."
+    )
     ap.add_argument("--behaviour", required=True, choices=sorted(BEHAVIOURS))
     ap.add_argument("--root", required=True, help="output directory (must not exist)")
     ap.add_argument("--frames", type=int, required=True, help="record episodes until about this many frames")
@@ -699,16 +822,31 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--images", action="store_true", help="also record observation.images.top (video)")
     ap.add_argument("--image-size", type=int, default=96)
-    ap.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
-                    help="operator keyword argument (repeatable), e.g. noise=0.003 or cursor_reach=none")
+    ap.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="operator keyword argument (repeatable), e.g. noise=0.003 or cursor_reach=none",
+    )
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
-    ds = record_planar_push_dataset(args.behaviour, args.root, args.frames, args.seed, args.images, args.repo_id,
-                                    args.image_size, verbose=True,
-                                    operator_options=parse_options(BEHAVIOURS[args.behaviour][0], args.option))
+    ds = record_planar_push_dataset(
+        args.behaviour,
+        args.root,
+        args.frames,
+        args.seed,
+        args.images,
+        args.repo_id,
+        args.image_size,
+        verbose=True,
+        operator_options=parse_options(BEHAVIOURS[args.behaviour][0], args.option),
+    )
     states = np.stack([np.asarray(x) for x in ds.hf_dataset["observation.state"]])
-    print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in "
-          f"{time.perf_counter() - t0:.0f} s; disc coverage {disc_coverage(states):.2f} of the maze cells")
+    print(
+        f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in "
+        f"{time.perf_counter() - t0:.0f} s; disc coverage {disc_coverage(states):.2f} of the maze cells"
+    )
 
 
 if __name__ == "__main__":

@@ -45,7 +45,6 @@ from typing import ClassVar
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-
 from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
 
@@ -113,7 +112,9 @@ def check_state(state, name: str = "state") -> np.ndarray:
     """Validate a 4-D [eff_x, eff_y, obj_x, obj_y]: finite, both discs inside free space, not overlapping."""
     s = np.asarray(state, dtype=np.float64).reshape(-1)
     if s.shape != (4,) or not np.all(np.isfinite(s)):
-        raise ValueError(f"planar_push {name} must be 4 finite numbers [eff_x, eff_y, obj_x, obj_y], got {state!r}")
+        raise ValueError(
+            f"planar_push {name} must be 4 finite numbers [eff_x, eff_y, obj_x, obj_y], got {state!r}"
+        )
     if wall_distance(s[:2]) < EFFECTOR_RADIUS - 1e-3:
         raise ValueError(f"planar_push {name}: effector {s[:2].tolist()} overlaps a wall")
     if wall_distance(s[2:]) < OBJECT_RADIUS - 1e-3:
@@ -127,12 +128,18 @@ def build_mjcf(offscreen: int = 256) -> str:
     """MJCF of the scene (see the module docstring for the mapping of the reference's constants)."""
     m_obj = OBJECT_DENSITY * np.pi * OBJECT_RADIUS**2
     m_eff = EFFECTOR_DENSITY * np.pi * EFFECTOR_RADIUS**2
-    walls = [(0.0, ARENA + 0.1, ARENA + 0.2, 0.1), (0.0, -ARENA - 0.1, ARENA + 0.2, 0.1),
-             (ARENA + 0.1, 0.0, 0.1, ARENA + 0.2), (-ARENA - 0.1, 0.0, 0.1, ARENA + 0.2),
-             *map(tuple, wall_boxes())]
+    walls = [
+        (0.0, ARENA + 0.1, ARENA + 0.2, 0.1),
+        (0.0, -ARENA - 0.1, ARENA + 0.2, 0.1),
+        (ARENA + 0.1, 0.0, 0.1, ARENA + 0.2),
+        (-ARENA - 0.1, 0.0, 0.1, ARENA + 0.2),
+        *map(tuple, wall_boxes()),
+    ]
     wall_xml = "\n".join(
         f'    <geom name="wall{k}" type="box" pos="{cx:.6f} {cy:.6f} 0" size="{hx:.6f} {hy:.6f} 0.25" '
-        f'rgba="0.45 0.45 0.45 1"/>' for k, (cx, cy, hx, hy) in enumerate(walls))
+        f'rgba="0.45 0.45 0.45 1"/>'
+        for k, (cx, cy, hx, hy) in enumerate(walls)
+    )
     marker = f'contype="0" conaffinity="0" group="{GOAL_MARKER_GROUP}"'
     return f"""<mujoco model="planar_push">
   <option timestep="{TIMESTEP}" gravity="0 0 0" integrator="implicitfast"/>
@@ -174,9 +181,16 @@ class PlanarPushEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": FPS}
 
-    def __init__(self, task: str = "pair0", obs_type: str = "state", image_size: int = 96,
-                 render_mode: str = "rgb_array", render_size: int = 256, terminate_on_success: bool = True,
-                 reward: str = "success"):
+    def __init__(
+        self,
+        task: str = "pair0",
+        obs_type: str = "state",
+        image_size: int = 96,
+        render_mode: str = "rgb_array",
+        render_size: int = 256,
+        terminate_on_success: bool = True,
+        reward: str = "success",
+    ):
         self.suite = check_task(task)
         if reward not in REWARDS:
             raise ValueError(f"Unknown reward {reward!r}; valid: {list(REWARDS)}")
@@ -279,7 +293,12 @@ class PlanarPushEnv(gym.Env):
     def _info(self) -> dict:
         eff_err, obj_err = self.errors()
         ok = eff_err < SUCCESS_TOL and obj_err < SUCCESS_TOL
-        return {"is_success": bool(ok), "effector_distance": eff_err, "object_distance": obj_err, "task": self.task}
+        return {
+            "is_success": bool(ok),
+            "effector_distance": eff_err,
+            "object_distance": obj_err,
+            "task": self.task,
+        }
 
     # ----------------------------------------------------------------------------- gym API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -288,9 +307,13 @@ class PlanarPushEnv(gym.Env):
         if options.get("pair") is not None:
             k = int(options["pair"])
             if not 0 <= k < len(EVAL_PAIRS):
-                raise ValueError(f"options['pair'] must be in 0..{len(EVAL_PAIRS) - 1}, got {options['pair']!r}")
+                raise ValueError(
+                    f"options['pair'] must be in 0..{len(EVAL_PAIRS) - 1}, got {options['pair']!r}"
+                )
             name = TASK_NAMES[k]
-        elif self.suite == ALL:  # a seeded reset picks pair seed % 10: lerobot-eval's batched envs then cover all pairs
+        elif (
+            self.suite == ALL
+        ):  # a seeded reset picks pair seed % 10: lerobot-eval's batched envs then cover all pairs
             k = seed if seed is not None else self._reset_count
             name = TASK_NAMES[k % len(TASK_NAMES)]
         else:
@@ -312,7 +335,9 @@ class PlanarPushEnv(gym.Env):
     def step(self, action):
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         if a.shape != (2,) or not np.all(np.isfinite(a)):
-            raise ValueError(f"planar_push action must be 2 finite numbers (x, y), got {np.asarray(action)!r}")
+            raise ValueError(
+                f"planar_push action must be 2 finite numbers (x, y), got {np.asarray(action)!r}"
+            )
         self.command = np.clip(a, -ARENA, ARENA)
         d, mj = self.data, self._mj
         for _ in range(SUBSTEPS):
@@ -369,7 +394,9 @@ class PlanarPushEnvConfig(GoalEnvConfig):
     obs_type: str = "state"
     image_size: int = 96
     render_mode: str = "rgb_array"
-    reward: str = "success"  # or "progress": share of the initial goal distance closed (see the module docstring)
+    reward: str = (
+        "success"  # or "progress": share of the initial goal distance closed (see the module docstring)
+    )
     features: dict[str, PolicyFeature] = field(default_factory=lambda: state_goal_features(4, 2))
     features_map: dict[str, str] = field(default_factory=lambda: state_goal_features_map(CAMERA))
 
@@ -395,5 +422,8 @@ class PlanarPushEnvConfig(GoalEnvConfig):
 
 
 if GYM_ID not in gym.registry:
-    gym.register(id=GYM_ID, entry_point="lerobot_efm.envs.planar_push.env:PlanarPushEnv",
-                 max_episode_steps=DEFAULT_EPISODE_STEPS)
+    gym.register(
+        id=GYM_ID,
+        entry_point="lerobot_efm.envs.planar_push.env:PlanarPushEnv",
+        max_episode_steps=DEFAULT_EPISODE_STEPS,
+    )

@@ -16,7 +16,7 @@ vectorised wavefront (8-connected, diagonal steps cost sqrt(2) approximately thr
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -112,13 +112,13 @@ def free_disc_cells() -> np.ndarray:
     return wall_distance(np.stack([xs, ys], -1)) >= OBJECT_RADIUS
 
 
-@lru_cache(maxsize=None)
+@cache
 def _grid_points() -> np.ndarray:
     xs, ys = np.meshgrid(GRID_COORDS, GRID_COORDS, indexing="ij")  # [i, j] -> (x_i, y_j)
     return np.stack([xs, ys], -1)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _grid_wall_distance() -> np.ndarray:
     return wall_distance(_grid_points())
 
@@ -177,8 +177,8 @@ def distance_field(free: np.ndarray, goal_xy) -> np.ndarray:
     while True:
         new = dist.copy()
         for di, dj, c in _STEPS:
-            src = dist[max(di, 0): n + min(di, 0), max(dj, 0): n + min(dj, 0)]
-            dst = new[max(-di, 0): n + min(-di, 0), max(-dj, 0): n + min(-dj, 0)]
+            src = dist[max(di, 0) : n + min(di, 0), max(dj, 0) : n + min(dj, 0)]
+            dst = new[max(-di, 0) : n + min(-di, 0), max(-dj, 0) : n + min(-dj, 0)]
             np.minimum(dst, src + c * GRID_H, out=dst)
         new[~free] = np.inf
         if np.array_equal(new, dist):
@@ -206,15 +206,22 @@ def grid_path(dist: np.ndarray, start_xy, free: np.ndarray) -> np.ndarray:
     path = [(i, j)]
     n = dist.shape[0]
     while dist[i, j] > 0:
-        best = min(((dist[i + di, j + dj], i + di, j + dj) for di, dj, _ in _STEPS
-                    if 0 <= i + di < n and 0 <= j + dj < n), key=lambda t: t[0])
+        best = min(
+            (
+                (dist[i + di, j + dj], i + di, j + dj)
+                for di, dj, _ in _STEPS
+                if 0 <= i + di < n and 0 <= j + dj < n
+            ),
+            key=lambda t: t[0],
+        )
         i, j = best[1], best[2]
         path.append((i, j))
     return np.array([grid_point(a, b) for a, b in path])
 
 
-def lookahead(path: np.ndarray, start_xy, radius: float, max_dist: float, avoid=None,
-              avoid_radius: float = 0.0) -> np.ndarray:
+def lookahead(
+    path: np.ndarray, start_xy, radius: float, max_dist: float, avoid=None, avoid_radius: float = 0.0
+) -> np.ndarray:
     """Farthest path node within ``max_dist`` (along the path) reachable from ``start_xy`` in a straight line."""
     best = path[min(1, len(path) - 1)]
     seg = np.linalg.norm(np.diff(path, axis=0), axis=-1)

@@ -27,12 +27,11 @@ from __future__ import annotations
 import numpy as np
 
 from ...extras import require
+from .scene import GRIPPER_CLOSED, HOME, KitchenHandles
 
 mujoco = require("mujoco", "talos", "the Talos kitchen")
 
-from .scene import GRIPPER_CLOSED, HOME, KitchenHandles
-
-WORKSPACE_LOW = np.array([0.05, -0.45, 0.75])   # TCP position box (m, world frame)
+WORKSPACE_LOW = np.array([0.05, -0.45, 0.75])  # TCP position box (m, world frame)
 WORKSPACE_HIGH = np.array([0.80, 0.75, 1.60])
 COMMAND_NAMES = ("x", "y", "z", "r00", "r10", "r20", "r01", "r11", "r21", "gripper")
 
@@ -87,7 +86,9 @@ def validate_command(command: np.ndarray) -> np.ndarray:
     """Check shape and finiteness; returns a float copy. Raises ValueError naming bad entries."""
     cmd = np.asarray(command, dtype=float).reshape(-1)
     if cmd.shape != (10,):
-        raise ValueError(f"command must have 10 entries (pos 3, rot6d 6, gripper 1), got shape {np.shape(command)}")
+        raise ValueError(
+            f"command must have 10 entries (pos 3, rot6d 6, gripper 1), got shape {np.shape(command)}"
+        )
     bad = np.flatnonzero(~np.isfinite(cmd))
     if bad.size:
         names = ", ".join(f"{COMMAND_NAMES[i]} (index {i}) = {cmd[i]}" for i in bad)
@@ -205,10 +206,19 @@ class CartesianController:
     runs ``n_substeps`` ``mj_step`` (default 20 x 2 ms = 25 Hz control).
     """
 
-    def __init__(self, model: mujoco.MjModel, handles: KitchenHandles, n_substeps: int = 20,
-                 ik_iters: int = 15, damping: float = 0.02, rot_weight: float = 0.5,
-                 torso_weight: float = 0.3, max_joint_step: float = 0.25, posture_gain: float = 0.02,
-                 pot_weld: bool = True):
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        handles: KitchenHandles,
+        n_substeps: int = 20,
+        ik_iters: int = 15,
+        damping: float = 0.02,
+        rot_weight: float = 0.5,
+        torso_weight: float = 0.3,
+        max_joint_step: float = 0.25,
+        posture_gain: float = 0.02,
+        pot_weld: bool = True,
+    ):
         self.model, self.h = model, handles
         self.n_substeps, self.ik_iters = int(n_substeps), int(ik_iters)
         self.damping, self.rot_weight = float(damping), float(rot_weight)

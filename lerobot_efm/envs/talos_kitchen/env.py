@@ -50,7 +50,6 @@ from typing import ClassVar
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
@@ -58,15 +57,25 @@ from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 from ...extras import require
 from ..goal_env import GoalEnvConfig
 from .tasks import (
-    ALL, DOOR_TOL, POT_TOL, TASK_NAMES, TASKS, TRAY_TOL, KitchenState, KitchenTask, check_task, describe,
+    ALL,
+    DOOR_TOL,
+    POT_TOL,
+    TASK_NAMES,
+    TASKS,
+    TRAY_TOL,
+    KitchenState,
+    KitchenTask,
+    check_task,
+    describe,
 )
 
 GYM_ID = "lerobot_efm/TalosKitchen-v0"
 DEFAULT_EPISODE_STEPS = 600  # 24 s at 25 Hz
 CONTROL_FPS = 25
 CAMERA = "front"
-STATE_NAMES = tuple(f"cmd_{n}" for n in ("x", "y", "z", "r00", "r10", "r20", "r01", "r11", "r21", "gripper")) + (
-    "x", "y", "z", "r00", "r10", "r20", "r01", "r11", "r21", "gripper")
+STATE_NAMES = tuple(
+    f"cmd_{n}" for n in ("x", "y", "z", "r00", "r10", "r20", "r01", "r11", "r21", "gripper")
+) + ("x", "y", "z", "r00", "r10", "r20", "r01", "r11", "r21", "gripper")
 ENV_STATE_NAMES = ("door", "tray", "pot_x", "pot_y", "pot_z", "pot_qw", "pot_qx", "pot_qy", "pot_qz")
 STATE_DIM, ENV_STATE_DIM, ACTION_DIM = len(STATE_NAMES), len(ENV_STATE_NAMES), 10
 GOAL_STATE_KEY = "goal.state"
@@ -87,8 +96,15 @@ class TalosKitchenEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CONTROL_FPS}
 
-    def __init__(self, task: str = "open_door", image_size: int = 128, render_mode: str = "rgb_array",
-                 render_size: int | None = None, randomize: bool = True, terminate_on_success: bool = True):
+    def __init__(
+        self,
+        task: str = "open_door",
+        image_size: int = 128,
+        render_mode: str = "rgb_array",
+        render_size: int | None = None,
+        randomize: bool = True,
+        terminate_on_success: bool = True,
+    ):
         self.suite = check_task(task)
         self._reset_count = 0
         self._set_current(TASK_NAMES[0] if task == ALL else task)
@@ -108,8 +124,11 @@ class TalosKitchenEnv(gym.Env):
         self.model, self.data, self.h = scene.build_kitchen(big if big > 480 else 128)
         self.controller = control.CartesianController(self.model, self.h)
         self._renderer = scene.KitchenRenderer(self.model, self.image_size)
-        self._render_renderer = (self._renderer if self.render_size == self.image_size
-                                 else scene.KitchenRenderer(self.model, self.render_size))
+        self._render_renderer = (
+            self._renderer
+            if self.render_size == self.image_size
+            else scene.KitchenRenderer(self.model, self.render_size)
+        )
         self._tray_body = self.model.body("tray").id
         mujoco = require("mujoco", "talos", "the Talos kitchen")
 
@@ -119,14 +138,16 @@ class TalosKitchenEnv(gym.Env):
         img = spaces.Box(0, 255, shape=(self.image_size, self.image_size, 3), dtype=np.uint8)
         state = spaces.Box(-np.inf, np.inf, shape=(STATE_DIM,), dtype=np.float32)
         env_state = spaces.Box(-np.inf, np.inf, shape=(ENV_STATE_DIM,), dtype=np.float32)
-        self.observation_space = spaces.Dict({
-            "pixels": spaces.Dict({CAMERA: img}),
-            "agent_pos": state,
-            "environment_state": env_state,
-            GOAL_IMAGE_KEY: img,
-            GOAL_STATE_KEY: state,
-            GOAL_ENV_STATE_KEY: env_state,
-        })
+        self.observation_space = spaces.Dict(
+            {
+                "pixels": spaces.Dict({CAMERA: img}),
+                "agent_pos": state,
+                "environment_state": env_state,
+                GOAL_IMAGE_KEY: img,
+                GOAL_STATE_KEY: state,
+                GOAL_ENV_STATE_KEY: env_state,
+            }
+        )
         low = np.concatenate([control.WORKSPACE_LOW, -np.ones(6), [0.0]]).astype(np.float32)
         high = np.concatenate([control.WORKSPACE_HIGH, np.ones(6), [1.0]]).astype(np.float32)
         self.action_space = spaces.Box(low, high, dtype=np.float32)
@@ -138,8 +159,11 @@ class TalosKitchenEnv(gym.Env):
         self._goal_snapshot: tuple | None = None
         self._initial_snapshot: tuple | None = None
         # dataset names of the recorded vectors (lerobot-efm-record)
-        self.feature_names = {"observation.state": list(STATE_NAMES), "observation.environment_state": list(ENV_STATE_NAMES),
-                              "action": list(STATE_NAMES[10:])}
+        self.feature_names = {
+            "observation.state": list(STATE_NAMES),
+            "observation.environment_state": list(ENV_STATE_NAMES),
+            "action": list(STATE_NAMES[10:]),
+        }
 
     # ------------------------------------------------------------------------------ task / state
     def _set_current(self, name: str) -> None:
@@ -167,7 +191,9 @@ class TalosKitchenEnv(gym.Env):
         mujoco.mj_kinematics(m, d)
         if state.pot_on == "table":
             home = sc.POT_HOME
-            pos = np.array([home[0] + state.pot_xy[0], home[1] + state.pot_xy[1], sc.TABLE_TOP + TABLE_CLEARANCE])
+            pos = np.array(
+                [home[0] + state.pot_xy[0], home[1] + state.pot_xy[1], sc.TABLE_TOP + TABLE_CLEARANCE]
+            )
         else:  # tray frame (the tray body is axis-aligned with the world)
             pos = d.xpos[self._tray_body] + np.array([state.pot_xy[0], state.pot_xy[1], TRAY_FLOOR])
         a = h.pot_qpos
@@ -198,8 +224,16 @@ class TalosKitchenEnv(gym.Env):
 
     def _snapshot(self) -> tuple:
         d = self.data
-        return (d.time, d.qpos.copy(), d.qvel.copy(), d.act.copy(), d.ctrl.copy(), d.eq_active.copy(),
-                self._cmd.copy(), self.controller.q_target.copy())
+        return (
+            d.time,
+            d.qpos.copy(),
+            d.qvel.copy(),
+            d.act.copy(),
+            d.ctrl.copy(),
+            d.eq_active.copy(),
+            self._cmd.copy(),
+            self.controller.q_target.copy(),
+        )
 
     def restore(self, snap: tuple) -> None:
         """Restore a snapshot taken by the env (e.g. :meth:`set_goal_scene`)."""
@@ -232,8 +266,9 @@ class TalosKitchenEnv(gym.Env):
     def _env_vec(self) -> np.ndarray:
         sc = self._scene
         pos, quat = sc.pot_pose(self.data, self.h)
-        return np.concatenate([[sc.door_angle(self.data, self.h), sc.tray_slide(self.data, self.h)], pos,
-                               quat]).astype(np.float32)
+        return np.concatenate(
+            [[sc.door_angle(self.data, self.h), sc.tray_slide(self.data, self.h)], pos, quat]
+        ).astype(np.float32)
 
     def _obs(self, image: np.ndarray | None = None) -> dict:
         return {
@@ -310,8 +345,11 @@ class TalosKitchenEnv(gym.Env):
         return self._render_renderer.render(self.data)
 
     def close(self) -> None:
-        for r in {id(x): x for x in (getattr(self, "_renderer", None), getattr(self, "_render_renderer", None))
-                  if x is not None}.values():
+        for r in {
+            id(x): x
+            for x in (getattr(self, "_renderer", None), getattr(self, "_render_renderer", None))
+            if x is not None
+        }.values():
             r.close()
         super().close()
 
@@ -372,5 +410,8 @@ class TalosKitchenEnvConfig(GoalEnvConfig):
 
 
 if GYM_ID not in gym.registry:
-    gym.register(id=GYM_ID, entry_point="lerobot_efm.envs.talos_kitchen.env:TalosKitchenEnv",
-                 max_episode_steps=DEFAULT_EPISODE_STEPS)
+    gym.register(
+        id=GYM_ID,
+        entry_point="lerobot_efm.envs.talos_kitchen.env:TalosKitchenEnv",
+        max_episode_steps=DEFAULT_EPISODE_STEPS,
+    )

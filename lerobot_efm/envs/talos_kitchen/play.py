@@ -49,8 +49,16 @@ from . import scene, tasks
 from .control import matrix_to_rot6d, rot6d_to_matrix
 from .tasks import DOOR_TOL, POT_TOL, TRAY_TOL, KitchenState
 
-WEIGHTS = {"open_door": 3.0, "close_door": 3.0, "pull_tray": 3.0, "push_tray": 3.0, "pot_to_tray": 3.0,
-           "pot_to_table": 3.0, "wander": 1.0, "home": 2.0}
+WEIGHTS = {
+    "open_door": 3.0,
+    "close_door": 3.0,
+    "pull_tray": 3.0,
+    "push_tray": 3.0,
+    "pot_to_tray": 3.0,
+    "pot_to_table": 3.0,
+    "wander": 1.0,
+    "home": 2.0,
+}
 NOISE_STD = 0.003  # m per axis
 NOISE_TAU = 0.4  # s
 P_DETOUR, P_ABORT, P_PAUSE_STEP, P_PARTIAL = 0.3, 0.15, 0.006, 0.2
@@ -90,8 +98,17 @@ def tray_xyz(slide: float, xy=tasks.POT_TRAY_XY) -> np.ndarray:
 def state_name(s: KitchenState) -> str:
     door = "open" if abs(s.door - tasks.DOOR_OPEN) < DOOR_TOL else "closed" if s.door == 0 else f"{s.door:g}"
     tray = "out" if abs(s.tray - tasks.TRAY_OUT) < TRAY_TOL else "in" if s.tray == 0 else f"{s.tray:g}"
-    pot = "tray" if s.pot_on == "tray" else ("home" if tuple(s.pot_xy) == tasks.POT_TABLE_HOME
-                                             else "moved" if tuple(s.pot_xy) == tasks.POT_TABLE_MOVED else "table")
+    pot = (
+        "tray"
+        if s.pot_on == "tray"
+        else (
+            "home"
+            if tuple(s.pot_xy) == tasks.POT_TABLE_HOME
+            else "moved"
+            if tuple(s.pot_xy) == tasks.POT_TABLE_MOVED
+            else "table"
+        )
+    )
     return f"door_{door}/tray_{tray}/pot_{pot}"
 
 
@@ -127,7 +144,9 @@ def coverage(env_states) -> dict:
     e = np.asarray(env_states, dtype=float).reshape(-1, 9)
     door, tray, pot = e[:, 0], e[:, 1], e[:, 2:5]
     near = lambda target: np.linalg.norm(pot - target, axis=1) < POT_TOL  # noqa: E731
-    on_tray = np.linalg.norm(pot - (tray_xyz(0.0)[None] + np.c_[tray, np.zeros((len(e), 2))]), axis=1) < POT_TOL
+    on_tray = (
+        np.linalg.norm(pot - (tray_xyz(0.0)[None] + np.c_[tray, np.zeros((len(e), 2))]), axis=1) < POT_TOL
+    )
     masks = {
         "door_open": np.abs(door - tasks.DOOR_OPEN) < DOOR_TOL,
         "door_closed": np.abs(door - tasks.DOOR_CLOSED) < DOOR_TOL,
@@ -139,8 +158,11 @@ def coverage(env_states) -> dict:
     }
     for name, s in TASK_STATES.items():
         v = state_env_vec(s)
-        masks[f"state/{name}"] = ((np.abs(door - v[0]) < DOOR_TOL) & (np.abs(tray - v[1]) < TRAY_TOL)
-                                  & (np.linalg.norm(pot - v[2:5], axis=1) < POT_TOL))
+        masks[f"state/{name}"] = (
+            (np.abs(door - v[0]) < DOOR_TOL)
+            & (np.abs(tray - v[1]) < TRAY_TOL)
+            & (np.linalg.norm(pot - v[2:5], axis=1) < POT_TOL)
+        )
     return {k: {"frames": int(m.sum()), "visits": _visits(m)} for k, m in masks.items()}
 
 
@@ -155,7 +177,9 @@ def _rot_y(a: float) -> np.ndarray:
 class TalosPlayOperator:
     """Random feasible sub-tasks with human-like imperfections (see the module docstring)."""
 
-    def __init__(self, env, rng: np.random.Generator, noise_std: float = NOISE_STD, weights: dict | None = None):
+    def __init__(
+        self, env, rng: np.random.Generator, noise_std: float = NOISE_STD, weights: dict | None = None
+    ):
         self.env, self.rng = env, rng
         self.noise_std = float(noise_std)
         self.weights = dict(WEIGHTS if weights is None else weights)
@@ -191,11 +215,17 @@ class TalosPlayOperator:
         elif kind == 3:
             s = KitchenState(tray=float(r.uniform(-0.275, -0.265)), pot_on="tray", pot_xy=tasks.POT_TRAY_XY)
         elif kind == 4:  # partial door or tray
-            s = (replace(s, door=float(r.uniform(-0.9, -0.25))) if r.random() < 0.5
-                 else replace(s, tray=float(r.uniform(-0.2, -0.05))))
+            s = (
+                replace(s, door=float(r.uniform(-0.9, -0.25)))
+                if r.random() < 0.5
+                else replace(s, tray=float(r.uniform(-0.2, -0.05)))
+            )
         jitter = r.uniform(-0.01, 0.01, 2) if s.pot_on == "table" else np.zeros(2)
-        return replace(s, pot_xy=(s.pot_xy[0] + jitter[0], s.pot_xy[1] + jitter[1]),
-                       pot_yaw=float(r.uniform(-0.05, 0.05)))
+        return replace(
+            s,
+            pot_xy=(s.pot_xy[0] + jitter[0], s.pot_xy[1] + jitter[1]),
+            pot_yaw=float(r.uniform(-0.05, 0.05)),
+        )
 
     def reset(self) -> dict:
         self.env.set_state(self.random_state())
@@ -293,7 +323,9 @@ class TalosPlayOperator:
         else:  # keep the elbow off the opened panel
             pos = np.array([r.uniform(0.25, 0.40), r.uniform(-0.22, 0.05), r.uniform(0.97, 1.15)])
         mat = P._rz(r.uniform(-0.4, 0.4)) @ _rot_y(r.uniform(-0.3, 0.3)) @ rot6d_to_matrix(self._home[3:9])
-        return np.concatenate([pos, matrix_to_rot6d(mat), [r.uniform(0.0, 0.4) if r.random() < 0.3 else P.OPEN]])
+        return np.concatenate(
+            [pos, matrix_to_rot6d(mat), [r.uniform(0.0, 0.4) if r.random() < 0.3 else P.OPEN]]
+        )
 
     def _go(self, goal: np.ndarray, grip_open: bool = True) -> Iterator[np.ndarray]:
         goal = np.asarray(goal, float).copy()
@@ -319,7 +351,7 @@ class TalosPlayOperator:
             yield from P.move(pre, near, speed=0.08)
             if r.random() < 0.5:  # missed grasp: close short of the handle
                 yield from P.set_gripper(near, 0.8, steps=int(r.integers(6, 15)))
-                near = (yield from P.release(near, steps=6, data=self.env.data, handles=self.env.h))
+                near = yield from P.release(near, steps=6, data=self.env.data, handles=self.env.h)
             yield from P.hold(near, int(r.integers(3, 15)))
             yield from P.retreat(near, direction, 0.10, speed=0.12)
 
@@ -366,14 +398,18 @@ class TalosPlayOperator:
 
     def _pot_plan(self, dest: np.ndarray, place_z: float):
         env = self.env
-        yield from self._prelude(scene.pot_handle_pos(env.data, env.h, "left"), P.rot_down(0.0), [0.0, 0.0, -1.0])
+        yield from self._prelude(
+            scene.pot_handle_pos(env.data, env.h, "left"), P.rot_down(0.0), [0.0, 0.0, -1.0]
+        )
         yield from P.pot_pick_place(env.data, env.h, self._last, dest[:2], place_z=place_z)
 
     def _plan_pot_to_tray(self):
         tray = self.read_state()[1]
         xy = np.asarray(tasks.POT_TRAY_XY) + [self.rng.uniform(-0.015, 0.0), self.rng.uniform(-0.01, 0.01)]
         dest = tray_xyz(tray, xy)
-        self._check = lambda: np.linalg.norm(self.read_state()[3][2:5] - tray_xyz(self.read_state()[1])) < POT_TOL
+        self._check = (
+            lambda: np.linalg.norm(self.read_state()[3][2:5] - tray_xyz(self.read_state()[1])) < POT_TOL
+        )
         return "pot_to_tray", self._pot_plan(dest, TRAY_TOP_Z)
 
     def _plan_pot_to_table(self):
@@ -398,10 +434,12 @@ class TalosPlayOperator:
             for _ in range(int(self.rng.integers(1, 4))):
                 yield from self._go(self._free_point())
                 yield from P.hold(self._last, int(self.rng.integers(0, 10)))
+
         return "wander", gen()
 
     def _plan_home(self):
         def gen():
             yield from self._go(self._home)
             yield from P.hold(self._home, int(self.rng.integers(10, 60)))
+
         return "home", gen()

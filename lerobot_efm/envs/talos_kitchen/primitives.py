@@ -106,8 +106,9 @@ def _slerp_mats(r0: np.ndarray, r1: np.ndarray, t: float) -> np.ndarray:
     return r0 @ (np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k)
 
 
-def move(start: np.ndarray, goal: np.ndarray, speed: float = SPEED, ang_speed: float = 1.2,
-         min_steps: int = 2) -> Iterator[np.ndarray]:
+def move(
+    start: np.ndarray, goal: np.ndarray, speed: float = SPEED, ang_speed: float = 1.2, min_steps: int = 2
+) -> Iterator[np.ndarray]:
     """Straight-line (position) + slerp (rotation) interpolation from ``start`` to ``goal``.
 
     The gripper entry is interpolated too. The last command is ``goal`` itself.
@@ -145,7 +146,9 @@ def welded(data, handles) -> str | None:
     return None
 
 
-def grasp(command: np.ndarray, steps: int = 15, data=None, handles=None, max_steps: int = 40) -> Iterator[np.ndarray]:
+def grasp(
+    command: np.ndarray, steps: int = 15, data=None, handles=None, max_steps: int = 40
+) -> Iterator[np.ndarray]:
     """Close the gripper in place; with ``data``/``handles`` also wait (up to ``max_steps``) for the weld."""
     yield from set_gripper(command, CLOSED, steps)
     if data is not None:
@@ -175,8 +178,9 @@ def release(command: np.ndarray, steps: int = 12, data=None, handles=None, max_s
     return c
 
 
-def approach(start: np.ndarray, pos, mat, direction, standoff: float = 0.10, grip: float = PRE,
-             speed: float = SPEED) -> Iterator[np.ndarray]:
+def approach(
+    start: np.ndarray, pos, mat, direction, standoff: float = 0.10, grip: float = PRE, speed: float = SPEED
+) -> Iterator[np.ndarray]:
     """Go to ``standoff`` before ``pos`` along ``-direction`` (the approach direction), then onto it."""
     direction = np.asarray(direction, float) / np.linalg.norm(direction)
     pre = cmd(np.asarray(pos) - standoff * direction, mat, grip)
@@ -210,8 +214,9 @@ def door_grasp_pose(data, handles, angle: float | None = None, yaw_gain: float =
     return pos, rot_forward(yaw), inward
 
 
-def door_arc(data, handles, start: np.ndarray, target_angle: float, step: float = 0.03,
-             yaw_gain: float = DOOR_YAW_GAIN) -> Iterator[np.ndarray]:
+def door_arc(
+    data, handles, start: np.ndarray, target_angle: float, step: float = 0.03, yaw_gain: float = DOOR_YAW_GAIN
+) -> Iterator[np.ndarray]:
     """Gripper closed, TCP along the handle's arc from the current door angle to ``target_angle``.
 
     Waypoints are computed from the hinge geometry every ``step`` rad (~0.75 rad/s at 25 Hz).
@@ -233,7 +238,9 @@ def _toward_home(pos) -> np.ndarray:
     return v / max(np.linalg.norm(v), 1e-9)
 
 
-def door_move(data, handles, start: np.ndarray, target_angle: float, standoff: float = 0.07) -> Iterator[np.ndarray]:
+def door_move(
+    data, handles, start: np.ndarray, target_angle: float, standoff: float = 0.07
+) -> Iterator[np.ndarray]:
     """Approach the door handle, grasp, move the door along the arc to ``target_angle``, release, retreat."""
     pos, mat, inward = door_grasp_pose(data, handles)
     yield from approach(start, pos, mat, inward, standoff=standoff)
@@ -243,7 +250,8 @@ def door_move(data, handles, start: np.ndarray, target_angle: float, standoff: f
     for last in door_arc(data, handles, c, target_angle):
         yield last
     opened = yield from release(last, steps=10, data=data, handles=handles)
-    for last in retreat(opened, -_toward_home(last[:3]), 0.08):
+    away = -_toward_home(last[:3])
+    for last in retreat(opened, away, 0.08):
         yield last
 
 
@@ -271,16 +279,23 @@ def tray_move(data, handles, start: np.ndarray, target_slide: float) -> Iterator
     goal = cmd(scene.tray_handle_pos(data, handles, target_slide), mat, CLOSED)
     yield from move(c, goal, speed=0.10)
     yield from hold(goal, 10)
-    last = yield from release(goal, data=data, handles=handles)
-    for last in retreat(last, fwd, 0.08):
-        yield last
+    released = yield from release(goal, data=data, handles=handles)
+    yield from retreat(released, fwd, 0.08)
 
 
 # ------------------------------------------------------------------------------------------- pot
 
 
-def pot_pick_place(data, handles, start: np.ndarray, place_xy, place_z: float = scene.TABLE_TOP,
-                   lift: float = 0.12, side: str = "left", place_yaw: float = 0.0) -> Iterator[np.ndarray]:
+def pot_pick_place(
+    data,
+    handles,
+    start: np.ndarray,
+    place_xy,
+    place_z: float = scene.TABLE_TOP,
+    lift: float = 0.12,
+    side: str = "left",
+    place_yaw: float = 0.0,
+) -> Iterator[np.ndarray]:
     """Grasp the pot by a handle from above, lift, carry, put its base centre at ``(place_xy, place_z)``.
 
     ``place_yaw`` (rad) turns the pot about the vertical while it is carried (the hand turns with
@@ -304,9 +319,8 @@ def pot_pick_place(data, handles, start: np.ndarray, place_xy, place_z: float = 
     put = cmd(dst + [0, 0, 0.005], mat_place, CLOSED)
     yield from move(above, put, speed=0.08)
     yield from hold(put, 8)
-    last = yield from release(put, data=data, handles=handles)
-    for last in retreat(last, down, 0.10):
-        yield last
+    released = yield from release(put, data=data, handles=handles)
+    yield from retreat(released, down, 0.10)
 
 
 # ------------------------------------------------------------------------------------------- run

@@ -112,7 +112,11 @@ DOOR_HINGE = (CAB_X0 - 0.013, CAB_Y0 + 0.005, 1.085)  # hinge axis position (wor
 DOOR_HANDLE_LOCAL = (-0.05, 0.29, 0.0)  # handle bar centre in the door frame
 DRAWER_Z = 0.74  # bottom of the drawer slot under the door compartment
 TRAY_HANDLE_LOCAL = (-0.20, 0.0, 0.06)  # tray handle bar centre in the tray frame
-TRAY_POS0 = (CAB_X0 + 0.21, (CAB_Y0 + CAB_Y1) / 2, DRAWER_Z + 0.002)  # tray body origin when pushed in  # tray handle bar centre in the tray frame
+TRAY_POS0 = (
+    CAB_X0 + 0.21,
+    (CAB_Y0 + CAB_Y1) / 2,
+    DRAWER_Z + 0.002,
+)  # tray body origin when pushed in  # tray handle bar centre in the tray frame
 POT_RADIUS = 0.085
 POT_HEIGHT = 0.10
 
@@ -122,7 +126,9 @@ def talos_data_dir() -> Path:
     dist = require_distribution("example-robot-data", "talos", "the Talos kitchen (robot meshes)")
     root = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots/talos_data"))
     if not (root / "robots" / "talos_full_v2.urdf").is_file():
-        raise FileNotFoundError(f"talos_full_v2.urdf not found under {root} (example-robot-data 6.0.0 expected)")
+        raise FileNotFoundError(
+            f"talos_full_v2.urdf not found under {root} (example-robot-data 6.0.0 expected)"
+        )
     return root
 
 
@@ -189,15 +195,29 @@ def _look_at_quat(pos, target) -> np.ndarray:
 
 def _box(body, name, pos, half, rgba, **kw):
     return body.add_geom(
-        name=name, type=mujoco.mjtGeom.mjGEOM_BOX, pos=pos, size=half, rgba=rgba,
-        contype=1, conaffinity=3, group=0, **kw,
+        name=name,
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        pos=pos,
+        size=half,
+        rgba=rgba,
+        contype=1,
+        conaffinity=3,
+        group=0,
+        **kw,
     )
 
 
 def _capsule(body, name, p0, p1, radius, rgba, **kw):
     return body.add_geom(
-        name=name, type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=list(p0) + list(p1), size=[radius, 0, 0],
-        rgba=rgba, contype=1, conaffinity=3, group=0, **kw,
+        name=name,
+        type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+        fromto=list(p0) + list(p1),
+        size=[radius, 0, 0],
+        rgba=rgba,
+        contype=1,
+        conaffinity=3,
+        group=0,
+        **kw,
     )
 
 
@@ -218,20 +238,39 @@ def _add_kitchen(spec: mujoco.MjSpec) -> None:
     spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
     spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
 
-    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.05],
-                   rgba=[0.55, 0.55, 0.5, 1], contype=1, conaffinity=3)
-    world.add_geom(name="wall", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[1.05, 0.2, 1.2], size=[0.02, 1.5, 1.2],
-                   rgba=[0.8, 0.82, 0.86, 1], contype=0, conaffinity=0)
-    world.add_light(name="top", pos=[0.4, 0.0, 2.8], dir=[0, 0, -1], castshadow=False,
-                    diffuse=[0.5, 0.5, 0.5])
+    world.add_geom(
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[3, 3, 0.05],
+        rgba=[0.55, 0.55, 0.5, 1],
+        contype=1,
+        conaffinity=3,
+    )
+    world.add_geom(
+        name="wall",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        pos=[1.05, 0.2, 1.2],
+        size=[0.02, 1.5, 1.2],
+        rgba=[0.8, 0.82, 0.86, 1],
+        contype=0,
+        conaffinity=0,
+    )
+    world.add_light(
+        name="top", pos=[0.4, 0.0, 2.8], dir=[0, 0, -1], castshadow=False, diffuse=[0.5, 0.5, 0.5]
+    )
 
     # table (right of the robot's midline, clear of the cabinet)
     table = world.add_body(name="table", pos=[TABLE_CENTER[0], TABLE_CENTER[1], 0.0])
     thx_, thy_ = TABLE_HALF
     _box(table, "table_top", [0, 0, TABLE_TOP - 0.02], [thx_, thy_, 0.02], WOOD)
     for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
-        _box(table, f"table_leg{i}", [sx * (thx_ - 0.03), sy * (thy_ - 0.03), (TABLE_TOP - 0.04) / 2],
-             [0.02, 0.02, (TABLE_TOP - 0.04) / 2], WOOD)
+        _box(
+            table,
+            f"table_leg{i}",
+            [sx * (thx_ - 0.03), sy * (thy_ - 0.03), (TABLE_TOP - 0.04) / 2],
+            [0.02, 0.02, (TABLE_TOP - 0.04) / 2],
+            WOOD,
+        )
 
     # cabinet: front plane x = CAB_X0, y in [CAB_Y0, CAB_Y1], depth 0.40, height 1.25
     x0, y0, y1 = CAB_X0, CAB_Y0, CAB_Y1
@@ -240,11 +279,24 @@ def _add_kitchen(spec: mujoco.MjSpec) -> None:
     xm, ym = (x0 + x1) / 2, (y0 + y1) / 2
     # solid base to z = DRAWER_Z, then an open drawer slot (DRAWER_Z .. 0.90) holding the pull-out tray
     _box(cab, "cab_lower", [xm, ym, DRAWER_Z / 2], [(x1 - x0) / 2, (y1 - y0) / 2, DRAWER_Z / 2], WHITE)
-    _box(cab, "cab_slot_back", [x1 - t / 2, ym, (DRAWER_Z + 0.90) / 2], [t / 2, (y1 - y0) / 2, (0.90 - DRAWER_Z) / 2], WHITE)
+    _box(
+        cab,
+        "cab_slot_back",
+        [x1 - t / 2, ym, (DRAWER_Z + 0.90) / 2],
+        [t / 2, (y1 - y0) / 2, (0.90 - DRAWER_Z) / 2],
+        WHITE,
+    )
     for nm_, yy in (("r", y0 + t / 2), ("l", y1 - t / 2)):
-        _box(cab, f"cab_slot_side_{nm_}", [xm, yy, (DRAWER_Z + 0.90) / 2], [(x1 - x0) / 2, t / 2, (0.90 - DRAWER_Z) / 2],
-             WHITE)
-    _box(cab, "cab_shelf", [xm, ym, 0.91], [(x1 - x0) / 2, (y1 - y0) / 2, 0.01], WHITE)   # floor of compartment 0.92
+        _box(
+            cab,
+            f"cab_slot_side_{nm_}",
+            [xm, yy, (DRAWER_Z + 0.90) / 2],
+            [(x1 - x0) / 2, t / 2, (0.90 - DRAWER_Z) / 2],
+            WHITE,
+        )
+    _box(
+        cab, "cab_shelf", [xm, ym, 0.91], [(x1 - x0) / 2, (y1 - y0) / 2, 0.01], WHITE
+    )  # floor of compartment 0.92
     _box(cab, "cab_top", [xm, ym, h - t / 2], [(x1 - x0) / 2, (y1 - y0) / 2, t / 2], WHITE)
     _box(cab, "cab_back", [x1 - t / 2, ym, (0.92 + h) / 2], [t / 2, (y1 - y0) / 2, (h - 0.92) / 2], WHITE)
     _box(cab, "cab_side_r", [xm, y0 + t / 2, (0.92 + h) / 2], [(x1 - x0) / 2, t / 2, (h - 0.92) / 2], WHITE)
@@ -254,21 +306,44 @@ def _add_kitchen(spec: mujoco.MjSpec) -> None:
     # midline) and the joint axis is -z, so that negative angles open the door towards the robot
     # and the handle's arc stays inside the left arm's workspace.
     door = cab.add_body(name="door", pos=list(DOOR_HINGE))
-    door.add_joint(name="door_hinge", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, -1],
-                   range=[-np.degrees(2.0), 0.0],  # MjSpec hinge ranges are in degrees (compiler default)
-                   limited=True, damping=1.5, frictionloss=0.1, armature=0.01)
+    door.add_joint(
+        name="door_hinge",
+        type=mujoco.mjtJoint.mjJNT_HINGE,
+        axis=[0, 0, -1],
+        range=[-np.degrees(2.0), 0.0],  # MjSpec hinge ranges are in degrees (compiler default)
+        limited=True,
+        damping=1.5,
+        frictionloss=0.1,
+        armature=0.01,
+    )
     dw = y1 - y0 - 0.01
     _box(door, "door_panel", [0, dw / 2, 0], [0.01, dw / 2, 0.16], WOOD, mass=2.0)
     hx, hy = DOOR_HANDLE_LOCAL[0], DOOR_HANDLE_LOCAL[1]
-    _box(door, "door_handle", [hx, hy, 0], [0.008, 0.008, 0.07], METAL, mass=0.05, friction=[1.5, 0.02, 0.002])
+    _box(
+        door, "door_handle", [hx, hy, 0], [0.008, 0.008, 0.07], METAL, mass=0.05, friction=[1.5, 0.02, 0.002]
+    )
     for i, z in enumerate((-0.065, 0.065)):
-        _box(door, f"door_handle_arm{i}", [(hx - 0.01) / 2, hy, z], [(-hx - 0.01) / 2 + 0.002, 0.006, 0.006],
-             METAL, mass=0.02)
+        _box(
+            door,
+            f"door_handle_arm{i}",
+            [(hx - 0.01) / 2, hy, z],
+            [(-hx - 0.01) / 2 + 0.002, 0.006, 0.006],
+            METAL,
+            mass=0.02,
+        )
 
     # pull-out tray in the compartment (slides along x towards the robot)
     tray = cab.add_body(name="tray", pos=list(TRAY_POS0))
-    tray.add_joint(name="tray_slide", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0], range=[-0.28, 0.0],
-                   limited=True, damping=3.0, frictionloss=0.2, armature=0.01)
+    tray.add_joint(
+        name="tray_slide",
+        type=mujoco.mjtJoint.mjJNT_SLIDE,
+        axis=[1, 0, 0],
+        range=[-0.28, 0.0],
+        limited=True,
+        damping=3.0,
+        frictionloss=0.2,
+        armature=0.01,
+    )
     tw = (y1 - y0) / 2 - 0.025
     _box(tray, "tray_bottom", [0, 0, 0.004], [0.16, tw, 0.004], METAL, mass=0.6)
     _box(tray, "tray_front", [-0.155, 0, 0.03], [0.005, tw, 0.03], METAL, mass=0.1)
@@ -276,33 +351,78 @@ def _add_kitchen(spec: mujoco.MjSpec) -> None:
     for i, s in enumerate((-1, 1)):
         _box(tray, f"tray_side{i}", [0, s * (tw - 0.005), 0.03], [0.16, 0.005, 0.03], METAL, mass=0.1)
     thx, thz = TRAY_HANDLE_LOCAL[0], TRAY_HANDLE_LOCAL[2]  # vertical box-section handle bar (like the door's)
-    _box(tray, "tray_handle", [thx, 0, thz], [0.008, 0.008, 0.045], METAL, mass=0.05, friction=[1.5, 0.02, 0.002])
+    _box(
+        tray,
+        "tray_handle",
+        [thx, 0, thz],
+        [0.008, 0.008, 0.045],
+        METAL,
+        mass=0.05,
+        friction=[1.5, 0.02, 0.002],
+    )
     for i, z in enumerate((thz - 0.04, thz + 0.04)):
-        _box(tray, f"tray_handle_arm{i}", [(thx - 0.16) / 2, 0, z], [(-0.16 - thx) / 2, 0.006, 0.006], METAL, mass=0.02)
+        _box(
+            tray,
+            f"tray_handle_arm{i}",
+            [(thx - 0.16) / 2, 0, z],
+            [(-0.16 - thx) / 2, 0.006, 0.006],
+            METAL,
+            mass=0.02,
+        )
 
     # red pot with two bar handles on +-y
     pot = world.add_body(name="pot", pos=[POT_HOME[0], POT_HOME[1], TABLE_TOP + 0.001])
     pot.add_freejoint(name="pot_free")
-    pot.add_geom(name="pot_bottom", type=mujoco.mjtGeom.mjGEOM_CYLINDER, pos=[0, 0, 0.005],
-                 size=[POT_RADIUS, 0.005, 0], rgba=RED, mass=0.25, contype=1, conaffinity=3)
+    pot.add_geom(
+        name="pot_bottom",
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        pos=[0, 0, 0.005],
+        size=[POT_RADIUS, 0.005, 0],
+        rgba=RED,
+        mass=0.25,
+        contype=1,
+        conaffinity=3,
+    )
     n_seg = 16
     seg_half = POT_RADIUS * np.tan(np.pi / n_seg) + 0.001
     for i in range(n_seg):
         a = 2 * np.pi * i / n_seg
         quat = [np.cos(a / 2), 0, 0, np.sin(a / 2)]
-        pot.add_geom(name=f"pot_wall{i}", type=mujoco.mjtGeom.mjGEOM_BOX,
-                     pos=[POT_RADIUS * np.cos(a), POT_RADIUS * np.sin(a), 0.011 + POT_HEIGHT / 2], quat=quat,
-                     size=[0.003, seg_half, POT_HEIGHT / 2], rgba=RED, mass=0.025, contype=1, conaffinity=3)
+        pot.add_geom(
+            name=f"pot_wall{i}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=[POT_RADIUS * np.cos(a), POT_RADIUS * np.sin(a), 0.011 + POT_HEIGHT / 2],
+            quat=quat,
+            size=[0.003, seg_half, POT_HEIGHT / 2],
+            rgba=RED,
+            mass=0.025,
+            contype=1,
+            conaffinity=3,
+        )
     for side, s in (("left", 1), ("right", -1)):
         yb = s * (POT_RADIUS + 0.065)
         z = POT_HEIGHT - 0.01
-        pot.add_geom(name=f"pot_handle_{side}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                     fromto=[-0.065, yb, z, 0.065, yb, z], size=[0.009, 0, 0], rgba=[0.15, 0.15, 0.15, 1],
-                     mass=0.05, contype=1, conaffinity=3)
+        pot.add_geom(
+            name=f"pot_handle_{side}",
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+            fromto=[-0.065, yb, z, 0.065, yb, z],
+            size=[0.009, 0, 0],
+            rgba=[0.15, 0.15, 0.15, 1],
+            mass=0.05,
+            contype=1,
+            conaffinity=3,
+        )
         for j, x in enumerate((-0.065, 0.065)):
-            pot.add_geom(name=f"pot_handle_{side}_arm{j}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                         fromto=[x, s * (POT_RADIUS * 0.7), z, x, yb, z], size=[0.006, 0, 0],
-                         rgba=[0.15, 0.15, 0.15, 1], mass=0.02, contype=1, conaffinity=3)
+            pot.add_geom(
+                name=f"pot_handle_{side}_arm{j}",
+                type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                fromto=[x, s * (POT_RADIUS * 0.7), z, x, yb, z],
+                size=[0.006, 0, 0],
+                rgba=[0.15, 0.15, 0.15, 1],
+                mass=0.02,
+                contype=1,
+                conaffinity=3,
+            )
 
     cam_pos = [-0.35, 1.30, 1.85]
     world.add_camera(name="front", pos=cam_pos, quat=_look_at_quat(cam_pos, [0.40, 0.05, 0.95]), fovy=55.0)
@@ -312,28 +432,28 @@ def _add_kitchen(spec: mujoco.MjSpec) -> None:
 class KitchenHandles:
     """Indices into the compiled model used by the controller and the env."""
 
-    arm_qpos: np.ndarray      # qpos addresses of the 7 left-arm joints
-    arm_dof: np.ndarray       # dof addresses of the same joints
+    arm_qpos: np.ndarray  # qpos addresses of the 7 left-arm joints
+    arm_dof: np.ndarray  # dof addresses of the same joints
     torso_qpos: np.ndarray
     torso_dof: np.ndarray
-    actuator: dict            # joint name (unprefixed) -> actuator id
-    home_qpos: np.ndarray     # full qpos of the home keyframe
-    left_tcp: int             # site id of the controlled hand frame
+    actuator: dict  # joint name (unprefixed) -> actuator id
+    home_qpos: np.ndarray  # full qpos of the home keyframe
+    left_tcp: int  # site id of the controlled hand frame
     left_gripper_body: int
     left_gripper_qpos: int
     door_qpos: int
     tray_qpos: int
-    pot_qpos: int             # start of the pot's 7 free-joint qpos (pos, quat)
+    pot_qpos: int  # start of the pot's 7 free-joint qpos (pos, quat)
     pot_body: int
-    pot_weld: int             # id of the (initially inactive) hand-pot weld equality
-    camera: int               # id of the "front" camera
+    pot_weld: int  # id of the (initially inactive) hand-pot weld equality
+    camera: int  # id of the "front" camera
     finger_geoms_a: frozenset  # collision geoms of fingertips 1-2 (one finger side)
     finger_geoms_b: frozenset  # collision geoms of fingertip 3 (the opposite side)
     pot_geoms: frozenset
     door_body: int = -1
     tray_body: int = -1
-    door_weld: int = -1       # id of the (initially inactive) hand-door-handle weld equality
-    tray_weld: int = -1       # id of the (initially inactive) hand-tray-handle weld equality
+    door_weld: int = -1  # id of the (initially inactive) hand-door-handle weld equality
+    tray_weld: int = -1  # id of the (initially inactive) hand-tray-handle weld equality
     door_handle_geoms: frozenset = frozenset()
     tray_handle_geoms: frozenset = frozenset()
 
@@ -345,13 +465,25 @@ def _compile(image_size: int) -> tuple[mujoco.MjModel, KitchenHandles]:
     frame = spec.worldbody.add_frame(pos=[0, 0, BASE_HEIGHT])
     spec.attach(_robot_spec(), frame=frame, prefix=ROBOT_PREFIX)
     # weld-on-contact grasp simplification for the pot (see control.PotWeld); inactive by default
-    spec.add_equality(name="pot_weld", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
-                      name1=ROBOT_PREFIX + "gripper_left_base_link", name2="pot", active=False)
+    spec.add_equality(
+        name="pot_weld",
+        type=mujoco.mjtEq.mjEQ_WELD,
+        objtype=mujoco.mjtObj.mjOBJ_BODY,
+        name1=ROBOT_PREFIX + "gripper_left_base_link",
+        name2="pot",
+        active=False,
+    )
     # door / tray handle grasps: ball-joint (connect) constraints at the TCP, so the hand can rotate
     # about the handle like a real pinch on a bar while the object follows the hand's position
     for obj in ("door", "tray"):
-        spec.add_equality(name=f"{obj}_weld", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_BODY,
-                          name1=ROBOT_PREFIX + "gripper_left_base_link", name2=obj, active=False)
+        spec.add_equality(
+            name=f"{obj}_weld",
+            type=mujoco.mjtEq.mjEQ_CONNECT,
+            objtype=mujoco.mjtObj.mjOBJ_BODY,
+            name1=ROBOT_PREFIX + "gripper_left_base_link",
+            name2=obj,
+            active=False,
+        )
     spec.visual.global_.offwidth = max(int(image_size), 640)
     spec.visual.global_.offheight = max(int(image_size), 480)
     model = spec.compile()
@@ -398,8 +530,12 @@ def _compile(image_size: int) -> tuple[mujoco.MjModel, KitchenHandles]:
         tray_body=model.body("tray").id,
         door_weld=model.equality("door_weld").id,
         tray_weld=model.equality("tray_weld").id,
-        door_handle_geoms=frozenset(g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("door_handle")),
-        tray_handle_geoms=frozenset(g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("tray_handle")),
+        door_handle_geoms=frozenset(
+            g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("door_handle")
+        ),
+        tray_handle_geoms=frozenset(
+            g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("tray_handle")
+        ),
     )
     return model, handles
 
@@ -488,8 +624,9 @@ class KitchenRenderer:
     Fast settings: no shadows, no MSAA (``offsamples = 0``), no reflections; collision meshes hidden.
     """
 
-    def __init__(self, model: mujoco.MjModel, height: int = 128, width: int | None = None,
-                 camera: str = "front"):
+    def __init__(
+        self, model: mujoco.MjModel, height: int = 128, width: int | None = None, camera: str = "front"
+    ):
         self.model = model
         self.camera = camera
         self._renderer = mujoco.Renderer(model, height=height, width=width or height)
@@ -520,8 +657,9 @@ class KitchenRenderer:
             pass
 
 
-def render(model: mujoco.MjModel, data: mujoco.MjData, renderer: KitchenRenderer | None = None,
-           image_size: int = 128) -> np.ndarray:
+def render(
+    model: mujoco.MjModel, data: mujoco.MjData, renderer: KitchenRenderer | None = None, image_size: int = 128
+) -> np.ndarray:
     """Render the ``front`` camera; pass a :class:`KitchenRenderer` to reuse its GL context."""
     if renderer is None:
         with KitchenRenderer(model, image_size) as r:

@@ -94,19 +94,30 @@ _TASK_LIST = [
     KitchenTask("close_door", _open, _closed, "close the cabinet door"),
     KitchenTask("pull_tray", _closed, _out, "pull the tray out of the cabinet"),
     KitchenTask("push_tray", _out, _closed, "push the tray back into the cabinet"),
-    KitchenTask("move_pot_on_table", _closed, replace(_closed, pot_xy=POT_TABLE_MOVED),
-                "slide the pot across the table, away from the cabinet"),
+    KitchenTask(
+        "move_pot_on_table",
+        _closed,
+        replace(_closed, pot_xy=POT_TABLE_MOVED),
+        "slide the pot across the table, away from the cabinet",
+    ),
     KitchenTask("pot_to_tray", _out, _out_pot_tray, "put the pot from the table onto the tray"),
     KitchenTask("pot_to_table", _out_pot_tray, _out, "put the pot from the tray back on the table"),
     KitchenTask("close_door_pull_tray", _open, _out, "close the door and pull the tray out"),
     KitchenTask("push_tray_open_door", _out, _open, "push the tray in and open the door"),
     KitchenTask("pull_tray_load_pot", _closed, _out_pot_tray, "pull the tray out and put the pot on it"),
-    KitchenTask("unload_pot", _out_pot_tray, _closed, "put the pot from the tray on the table and push the tray in"),
-    KitchenTask("unload_pot_open_door", _out_pot_tray, _open,
-                "put the pot on the table, push the tray in and open the door"),
+    KitchenTask(
+        "unload_pot", _out_pot_tray, _closed, "put the pot from the tray on the table and push the tray in"
+    ),
+    KitchenTask(
+        "unload_pot_open_door",
+        _out_pot_tray,
+        _open,
+        "put the pot on the table, push the tray in and open the door",
+    ),
     # long-horizon task (the paper's Fig. 8, adapted: see the module docstring)
-    KitchenTask(LONG_TASK, _open, _out_pot_tray,
-                "close the door, pull the tray out and put the pot on the tray"),
+    KitchenTask(
+        LONG_TASK, _open, _out_pot_tray, "close the door, pull the tray out and put the pot on the tray"
+    ),
 ]
 TASKS: dict[str, KitchenTask] = {t.name: t for t in _TASK_LIST}
 TASK_NAMES: tuple[str, ...] = tuple(TASKS)  # suite order used by the "all" task
