@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.utils import SuppressProgressBars
+from tqdm import tqdm
 
 from lerobot_efm.recording import finalizing
 
@@ -95,7 +96,8 @@ def convert_arrays(
         repo_id, fps=fps, features=ogbench_features(obs.shape[1], act.shape[1]), root=root, use_videos=False
     )
     with finalizing(ds):  # keeps the already saved episodes readable even if conversion fails mid-way
-        for start, end in episode_bounds(data["terminals"]):
+        bounds = episode_bounds(data["terminals"])
+        for start, end in tqdm(bounds, desc=f"converting to {repo_id}", unit="ep", leave=False):
             for t in range(start, end):
                 ds.add_frame({"observation.state": obs[t], "action": act[t], "task": task})
             with SuppressProgressBars():

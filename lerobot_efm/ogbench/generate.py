@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from lerobot_efm.extras import require
 
@@ -162,7 +163,7 @@ def generate_pointmaze(
     out["terminals"][episode_steps - 1 :: episode_steps] = True
 
     row = 0
-    for ep in range(num_episodes):
+    for ep in tqdm(range(num_episodes), desc=f"{dataset_name} episodes", unit="ep", leave=False):
         init_ij = cells[np.random.randint(len(cells))]
         if recipe.kind == "navigate":
             goal_ij = vertices[np.random.randint(len(vertices))]
