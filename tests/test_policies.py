@@ -265,3 +265,19 @@ def test_velocity_reached_rows_use_the_normalised_zero_action(state_dataset):
     lo, hi = torch.as_tensor(stats["min"]).float(), torch.as_tensor(stats["max"]).float()
     expected = 2 * (0 - lo) / (hi - lo) - 1  # MIN_MAX of a raw 0 command
     assert torch.allclose(policy.model.rest_action, expected, atol=1e-5)
+
+
+def test_model_card_is_lerobots_template_with_an_efm_section(state_dataset, monkeypatch):
+    """push_to_hub's card: LeRobot's standard sections (from its template) plus the agent, the goal keys and the
+    paper; offline (HF_HUB_OFFLINE) it is built without the Hub's validation."""
+    from huggingface_hub import constants
+
+    monkeypatch.setattr(constants, "HF_HUB_OFFLINE", True)
+    policy, *_ = build(state_dataset, "efm_ac", use_rl=True)
+    card = policy.generate_model_card("user/play", "efm_ac", None, ["mine"], dataset_meta=state_dataset.meta)
+    text = str(card)
+    for section in ("## Model Details", "## Training Dataset", "## How to Get Started with the Model"):
+        assert section in text, section  # LeRobot's template
+    efm = text.index("## Extremum Flow Matching: FM-AC-use-RL")
+    assert efm < text.index("## Model Details") and "observation.goal.*" in text and "2505.19717" in text
+    assert {"mine", "extremum-flow-matching", "lerobot", "efm_ac"} <= set(card.data.tags)
