@@ -19,7 +19,7 @@ from pathlib import Path
 from .synthetic import make_point_play_dataset
 
 REPO_ID = "local/efm_point_play"
-CONFIG = Path(__file__).resolve().parents[1] / "train_configs" / "point_reach_efm_ac.json"
+CONFIG = Path(__file__).resolve().parent / "train_configs" / "point_reach_efm_ac.json"  # package data
 
 
 def _run(cli: str, *args: str, log: Path) -> None:

@@ -138,3 +138,30 @@ def test_signal_while_saving_an_episode_keeps_it_and_stops(tmp_path, monkeypatch
 def test_unknown_operator_lists_the_registered_ones():
     with pytest.raises(ValueError, match="--env.type=talos_kitchen --operator=play"):
         operator_class("efm_point_reach", "expert")
+
+
+def test_push_to_hub_sends_our_dataset_card(tmp_path, monkeypatch):
+    """--push_to_hub=true: LeRobot's push gets the card of datasets_cards/ (tags, description, paper), which its
+    own card template renders (the Hub itself is unreachable here: the push is captured)."""
+    from lerobot.datasets.utils import create_lerobot_dataset_card
+
+    from lerobot_efm.scripts.record import main as record
+
+    pushed = {}
+    monkeypatch.setattr(LeRobotDataset, "push_to_hub", lambda self, **kwargs: pushed.update(kwargs))
+    record(
+        [
+            "--env.type=efm_point_reach",
+            "--repo_id=local/push_test",
+            f"--root={tmp_path / 'ds'}",
+            "--episodes=1",
+            "--episode_length=5",
+            "--push_to_hub=true",
+        ]
+    )
+    assert {"extremum-flow-matching", "play-data"} <= set(pushed["tags"]) and pushed["private"] is False
+    info = LeRobotDataset("local/push_test", root=tmp_path / "ds").meta.info  # what LeRobot's push adds
+    card = str(create_lerobot_dataset_card(dataset_info=info, **pushed))
+    assert (
+        "PointReach" in card and "arxiv.org/abs/2505.19717" in card and "More Information Needed" not in card
+    )

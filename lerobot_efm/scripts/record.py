@@ -17,6 +17,7 @@ import numpy as np
 from lerobot.configs import parser
 from lerobot.envs.configs import EnvConfig
 
+from lerobot_efm.dataset_card import recording_card_kwargs
 from lerobot_efm.recording import (
     dataset_features,
     finalizing,
@@ -97,7 +98,7 @@ def record(cfg: RecordConfig):
     for line in stats.failed:
         logging.warning("dropped %s", line)
     if cfg.push_to_hub:
-        dataset.push_to_hub(private=cfg.private)
+        dataset.push_to_hub(private=cfg.private, **recording_card_kwargs(cfg.env.type, cfg.operator))
     if stats.interrupted:
         raise SystemExit(130)
     return stats
