@@ -34,6 +34,8 @@ import numpy as np
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.utils import SuppressProgressBars
 
+from .crash_safe import repair_dataset, seal_episode_files
+
 GOAL_KEY_PREFIX = "goal."  # goal observations of the env: not recorded (hindsight makes goals)
 
 # (env type, operator name) -> "module:Class", imported when used (the modules import MuJoCo)
@@ -208,6 +210,7 @@ def record_episodes(
                     n += 1
                 with guard.saving(), SuppressProgressBars():
                     dataset.save_episode()
+                    seal_episode_files(dataset)  # on disk, a complete dataset even after a SIGKILL
                 saved = True
                 stats.saved, stats.frames = stats.saved + 1, stats.frames + n
                 guard.raise_pending()
@@ -262,6 +265,7 @@ def open_dataset(
     if resume:
         if not (root / "meta" / "info.json").exists():
             raise FileNotFoundError(f"--resume=true but {root} holds no LeRobot dataset (no meta/info.json)")
+        repair_dataset(root)  # debris of a recorder killed while saving an episode
         ds = LeRobotDataset.resume(repo_id, root=root)
         have = {k: tuple(v["shape"]) for k, v in ds.meta.features.items() if k in features}
         want = {k: tuple(v["shape"]) for k, v in features.items()}

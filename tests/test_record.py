@@ -1,5 +1,6 @@
 """``lerobot-efm-record``: scripted operators recorded as LeRobot datasets, safe to interrupt."""
 
+import json
 import os
 import signal
 import subprocess
@@ -165,3 +166,76 @@ def test_push_to_hub_sends_our_dataset_card(tmp_path, monkeypatch):
     assert (
         "PointReach" in card and "arxiv.org/abs/2505.19717" in card and "More Information Needed" not in card
     )
+
+
+def _sealed_episode_files(root) -> int:
+    from lerobot_efm.crash_safe import _readable
+
+    return sum(_readable(p) for p in root.glob("meta/episodes/**/*.parquet"))
+
+
+def test_a_recorder_killed_with_sigkill_keeps_every_saved_episode(tmp_path):
+    """SIGKILL cannot be caught (OOM killer, power cut): the files on disk must be a complete dataset after each
+    saved episode. Killed after >= 3 saved episodes, the dataset opens (after the repair --resume runs, which only
+    removes the debris of a save cut short) with all of them, video frames decodable, and recording resumes."""
+    import time
+
+    from lerobot_efm.crash_safe import repair_dataset
+
+    root = tmp_path / "ds"
+    proc = subprocess.Popen(
+        [*RECORD, *POINT_ARGS, f"--root={root}", "--episode_length=40", "--episodes=200"],
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while _sealed_episode_files(root) < 3 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+        saved = _sealed_episode_files(root)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert saved >= 3, f"only {saved} episodes saved before the deadline"
+    repair_dataset(root)
+    ds = LeRobotDataset("local/rec_test", root=root)
+    assert ds.num_episodes >= saved and ds.num_frames == 40 * ds.num_episodes
+    assert ds[ds.num_frames - 1]["observation.images.top"].shape == (3, 32, 32)  # the last video decodes
+    kept = ds.num_episodes
+    subprocess.run(
+        [*RECORD, *POINT_ARGS, f"--root={root}", "--episode_length=40", "--episodes=1", "--resume=true"],
+        check=True,
+        env=ENV,
+        capture_output=True,
+        timeout=300,
+    )
+    assert LeRobotDataset("local/rec_test", root=root).num_episodes == kept + 1
+
+
+def test_repair_removes_the_debris_of_a_save_cut_short(tmp_path):
+    """A kill inside save_episode: frames written without a footer, an episode-metadata file cut short and
+    info.json already counting the episode. The repair keeps the saved episodes and makes the dataset open."""
+    from lerobot_efm.crash_safe import repair_dataset
+
+    root = tmp_path / "ds"
+    subprocess.run(
+        [*RECORD, *POINT_ARGS, f"--root={root}", "--episode_length=20", "--episodes=3"],
+        check=True,
+        env=ENV,
+        capture_output=True,
+        timeout=300,
+    )
+    data = sorted(root.glob("data/**/*.parquet"))
+    meta = sorted(root.glob("meta/episodes/**/*.parquet"))
+    assert len(data) == len(meta) == 3  # one file of each per episode: every one closed when its episode was
+    cut_data, cut_meta = data[-1].with_name("file-009.parquet"), meta[-1].with_name("file-009.parquet")
+    cut_data.write_bytes(data[-1].read_bytes()[:-100])
+    cut_meta.write_bytes(meta[-1].read_bytes()[: len(meta[-1].read_bytes()) // 2])
+    info = json.loads((root / "meta/info.json").read_text())
+    (root / "meta/info.json").write_text(json.dumps({**info, "total_episodes": 4, "total_frames": 80}))
+    removed = repair_dataset(root)
+    assert {p.name for p in removed} == {"file-009.parquet"} and len(removed) == 2
+    ds = LeRobotDataset("local/rec_test", root=root)
+    assert ds.num_episodes == 3 and ds.num_frames == 60 and len(ds) == 60
+    assert json.loads((root / "meta/info.json").read_text())["total_episodes"] == 3
