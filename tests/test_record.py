@@ -19,15 +19,18 @@ POINT_ARGS = [
     "--env.type=efm_point_reach",
     "--env.obs_type=pixels_state",
     "--env.image_size=32",
-    "--repo_id=local/rec_test",
+    "--dataset.repo_id=local/rec_test",
+    "--dataset.push_to_hub=false",
 ]
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
 
 
 def test_cli_records_video_dataset_and_resumes(tmp_path):
     root = tmp_path / "ds"
-    args = [*RECORD, *POINT_ARGS, f"--root={root}", "--episode_length=30"]
-    subprocess.run([*args, "--episodes=2", "--seed=3"], check=True, env=ENV, capture_output=True, timeout=300)
+    args = [*RECORD, *POINT_ARGS, f"--dataset.root={root}", "--dataset.episode_time_s=1.5"]
+    subprocess.run(
+        [*args, "--dataset.num_episodes=2", "--seed=3"], check=True, env=ENV, capture_output=True, timeout=300
+    )
     ds = LeRobotDataset("local/rec_test", root=root)
     assert ds.num_episodes == 2 and ds.num_frames == 60
     assert ds.meta.features["observation.images.top"]["dtype"] == "video"
@@ -41,10 +44,16 @@ def test_cli_records_video_dataset_and_resumes(tmp_path):
     assert np.all(np.abs(actions) <= 1) and np.linalg.norm(np.diff(states, axis=0), axis=1).max() < 0.1
     assert ds.meta.tasks.index.tolist() == ["play"]
 
-    again = subprocess.run([*args, "--episodes=1", "--seed=4"], env=ENV, capture_output=True, text=True)
+    again = subprocess.run(
+        [*args, "--dataset.num_episodes=1", "--seed=4"], env=ENV, capture_output=True, text=True
+    )
     assert again.returncode != 0 and "--resume=true" in again.stderr  # never overwrites a dataset
     subprocess.run(
-        [*args, "--episodes=1", "--resume=true"], check=True, env=ENV, capture_output=True, timeout=300
+        [*args, "--dataset.num_episodes=1", "--resume=true"],
+        check=True,
+        env=ENV,
+        capture_output=True,
+        timeout=300,
     )
     ds = LeRobotDataset("local/rec_test", root=root)
     assert ds.num_episodes == 3 and ds.num_frames == 90
@@ -55,7 +64,13 @@ def test_cli_records_video_dataset_and_resumes(tmp_path):
 def test_interrupt_keeps_saved_episodes(tmp_path, sig):
     root = tmp_path / "ds"
     proc = subprocess.Popen(
-        [*RECORD, *POINT_ARGS, f"--root={root}", "--episodes=1000", "--episode_length=40"],
+        [
+            *RECORD,
+            *POINT_ARGS,
+            f"--dataset.root={root}",
+            "--dataset.num_episodes=1000",
+            "--dataset.episode_time_s=2",
+        ],
         env=ENV,
         stderr=subprocess.PIPE,
         text=True,
@@ -153,14 +168,14 @@ def test_push_to_hub_sends_our_dataset_card(tmp_path, monkeypatch):
     record(
         [
             "--env.type=efm_point_reach",
-            "--repo_id=local/push_test",
-            f"--root={tmp_path / 'ds'}",
-            "--episodes=1",
-            "--episode_length=5",
-            "--push_to_hub=true",
+            "--dataset.repo_id=local/push_test",
+            f"--dataset.root={tmp_path / 'ds'}",
+            "--dataset.num_episodes=1",
+            "--dataset.episode_time_s=0.25",
+            "--dataset.push_to_hub=true",
         ]
     )
-    assert {"extremum-flow-matching", "play-data"} <= set(pushed["tags"]) and pushed["private"] is False
+    assert {"extremum-flow-matching", "play-data"} <= set(pushed["tags"]) and not pushed["private"]
     info = LeRobotDataset("local/push_test", root=tmp_path / "ds").meta.info  # what LeRobot's push adds
     card = str(create_lerobot_dataset_card(dataset_info=info, **pushed))
     assert (
@@ -184,7 +199,13 @@ def test_a_recorder_killed_with_sigkill_keeps_every_saved_episode(tmp_path):
 
     root = tmp_path / "ds"
     proc = subprocess.Popen(
-        [*RECORD, *POINT_ARGS, f"--root={root}", "--episode_length=40", "--episodes=200"],
+        [
+            *RECORD,
+            *POINT_ARGS,
+            f"--dataset.root={root}",
+            "--dataset.episode_time_s=2",
+            "--dataset.num_episodes=200",
+        ],
         env=ENV,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
@@ -204,7 +225,14 @@ def test_a_recorder_killed_with_sigkill_keeps_every_saved_episode(tmp_path):
     assert ds[ds.num_frames - 1]["observation.images.top"].shape == (3, 32, 32)  # the last video decodes
     kept = ds.num_episodes
     subprocess.run(
-        [*RECORD, *POINT_ARGS, f"--root={root}", "--episode_length=40", "--episodes=1", "--resume=true"],
+        [
+            *RECORD,
+            *POINT_ARGS,
+            f"--dataset.root={root}",
+            "--dataset.episode_time_s=2",
+            "--dataset.num_episodes=1",
+            "--resume=true",
+        ],
         check=True,
         env=ENV,
         capture_output=True,
@@ -220,7 +248,13 @@ def test_repair_removes_the_debris_of_a_save_cut_short(tmp_path):
 
     root = tmp_path / "ds"
     subprocess.run(
-        [*RECORD, *POINT_ARGS, f"--root={root}", "--episode_length=20", "--episodes=3"],
+        [
+            *RECORD,
+            *POINT_ARGS,
+            f"--dataset.root={root}",
+            "--dataset.episode_time_s=1",
+            "--dataset.num_episodes=3",
+        ],
         check=True,
         env=ENV,
         capture_output=True,
@@ -239,3 +273,15 @@ def test_repair_removes_the_debris_of_a_save_cut_short(tmp_path):
     ds = LeRobotDataset("local/rec_test", root=root)
     assert ds.num_episodes == 3 and ds.num_frames == 60 and len(ds) == 60
     assert json.loads((root / "meta/info.json").read_text())["total_episodes"] == 3
+
+
+def test_lerobot_style_dataset_flags_are_checked():
+    """The recorder takes LeRobot's --dataset.* flags (DatasetRecordConfig); missing ones are named."""
+    proc = subprocess.run(
+        [*RECORD, "--env.type=efm_point_reach", "--dataset.repo_id=local/x", "--dataset.push_to_hub=false"],
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode != 0 and "--dataset.repo_id and --dataset.root are required" in proc.stderr

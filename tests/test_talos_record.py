@@ -33,10 +33,11 @@ def talos_play(tmp_path_factory):
     run(
         BIN / "lerobot-efm-record",
         "--env.type=talos_kitchen",
-        f"--root={root}",
-        f"--repo_id={REPO}",
-        "--episodes=2",
-        "--episode_length=70",
+        f"--dataset.root={root}",
+        f"--dataset.repo_id={REPO}",
+        "--dataset.num_episodes=2",
+        "--dataset.episode_time_s=2.8",  # 70 frames at the kitchen's 25 fps
+        "--dataset.push_to_hub=false",
         "--seed=5",
     )
     return root

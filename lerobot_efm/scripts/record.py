@@ -1,10 +1,12 @@
 """``lerobot-efm-record``: record a scripted operator in one of the plugin's envs as a LeRobot dataset.
 
-    lerobot-efm-record --env.type=talos_kitchen --episodes=20 --episode_length=2000 \\
-        --root=data/talos_play --repo_id=local/talos_kitchen_play
+    lerobot-efm-record --env.type=talos_kitchen --dataset.repo_id=local/talos_kitchen_play \\
+        --dataset.root=data/talos_play --dataset.num_episodes=20 --dataset.episode_time_s=80
 
-Ctrl-C keeps every saved episode (the unfinished one is dropped) and finalizes the dataset;
-``--resume=true`` appends to it later. See :mod:`lerobot_efm.recording`.
+The ``--dataset.*`` flags are LeRobot's own (``DatasetRecordConfig``, as in ``lerobot-record``); the frame rate
+is the env's control rate (``--dataset.fps`` and ``--dataset.reset_time_s`` do not apply to a simulator) and the
+repo id is kept as given (no date stamp: scripts and configs name it). Ctrl-C keeps every saved episode (the
+unfinished one is dropped), a SIGKILL too (:mod:`lerobot_efm.crash_safe`); ``--resume=true`` appends.
 """
 
 import logging
@@ -15,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from lerobot.configs import parser
+from lerobot.configs.dataset import DatasetRecordConfig
 from lerobot.envs.configs import EnvConfig
 
 from lerobot_efm.dataset_card import recording_card_kwargs
@@ -33,17 +36,21 @@ from lerobot_efm.scripts import run_cli
 @dataclass
 class RecordConfig:
     env: EnvConfig
-    root: Path
-    repo_id: str = "local/efm_play"
+    dataset: DatasetRecordConfig
     operator: str = "play"  # name registered for the env type in lerobot_efm.recording.OPERATORS
-    episodes: int = 10
-    episode_length: int = 2000  # frames per episode at most (the operator may end an episode earlier)
     seed: int = 0
-    resume: bool = False  # append to the dataset already at --root
-    video: bool = True  # cameras as mp4 (LeRobot's default); false: PNG frames
-    task: str | None = None  # task string stored with every frame; default: the operator's `task` or "play"
-    push_to_hub: bool = False
-    private: bool = False
+    resume: bool = False  # append to the dataset already at --dataset.root
+
+    def __post_init__(self):
+        if not self.dataset.repo_id or self.dataset.root is None:
+            raise ValueError(
+                "--dataset.repo_id and --dataset.root are required (e.g. local/my_play, data/my_play)"
+            )
+        if self.dataset.num_episodes < 1 or self.dataset.episode_time_s <= 0:
+            raise ValueError(
+                f"--dataset.num_episodes={self.dataset.num_episodes} and --dataset.episode_time_s="
+                f"{self.dataset.episode_time_s} must be positive"
+            )
 
 
 @parser.wrap()
@@ -54,12 +61,13 @@ def record(cfg: RecordConfig):
     env.reset(seed=cfg.seed)
     first = flatten_observation(operator.reset(), cfg.env.features_map)
     names = getattr(env, "feature_names", None)
-    features = dataset_features(first, int(np.prod(env.action_space.shape)), names, cfg.video)
+    data = cfg.dataset
+    features = dataset_features(first, int(np.prod(env.action_space.shape)), names, data.video)
     dataset = open_dataset(
-        Path(cfg.root), cfg.repo_id, cfg.env.fps, features, cfg.resume, cfg.env.type, cfg.video
+        Path(data.root), data.repo_id, cfg.env.fps, features, cfg.resume, cfg.env.type, data.video
     )
     start = dataset.meta.total_episodes
-    task = cfg.task or getattr(operator, "task", "play")
+    task = data.single_task or getattr(operator, "task", "play")
 
     t0 = time.perf_counter()
 
@@ -79,15 +87,15 @@ def record(cfg: RecordConfig):
             env,
             operator,
             cfg.env.features_map,
-            episodes=cfg.episodes,
-            episode_length=cfg.episode_length,
+            episodes=data.num_episodes,
+            episode_length=max(1, round(data.episode_time_s * cfg.env.fps)),
             task=task,
             seed=cfg.seed + start,
             on_episode=progress,
         )
     logging.info(
         "%s: %d episodes saved this run (%d frames, %.0f s)%s; dataset now %d episodes, %d frames",
-        Path(cfg.root).resolve(),
+        Path(data.root).resolve(),
         stats.saved,
         stats.frames,
         stats.seconds,
@@ -97,8 +105,10 @@ def record(cfg: RecordConfig):
     )
     for line in stats.failed:
         logging.warning("dropped %s", line)
-    if cfg.push_to_hub:
-        dataset.push_to_hub(private=cfg.private, **recording_card_kwargs(cfg.env.type, cfg.operator))
+    if data.push_to_hub:
+        card = recording_card_kwargs(cfg.env.type, cfg.operator)
+        card["tags"] = sorted(set(card["tags"]) | set(data.tags or []))
+        dataset.push_to_hub(private=data.private, **card)
     if stats.interrupted:
         raise SystemExit(130)
     return stats
