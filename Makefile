@@ -13,7 +13,7 @@ demo: .venv/.installed
 
 # Everything, the slow tests too (two-process training, the long Talos task plans): what CI runs.
 test: .venv/.installed lint
-	$(PY) -m pytest -q -m "slow or not slow"
+	$(PY) -m pytest -q -m "slow or not slow" --durations=15
 
 # LeRobot's house style (pyproject [tool.ruff]): lint and formatting, checked in CI before the tests.
 lint: .venv/.installed

@@ -6,7 +6,7 @@
 # Uses the viewer of the installed rerun-sdk (0.33+: `rerun --headless --screenshot-to`): no browser and no
 # display needed, but a Vulkan or OpenGL driver is; on a headless Debian/Ubuntu machine the software one
 # (llvmpipe/lavapipe) is `apt-get install mesa-vulkan-drivers`. The layout is the blueprint stored in the
-# recording (RolloutLogger.blueprint() for lerobot-efm-rollout): the first episode's tab, time cursor at the end.
+# recording (RolloutLogger.blueprint() for lerobot-efm-log-rollouts): the first episode's tab, time cursor at the end.
 # The headless viewer renders 2 pixels per point; the png is scaled back to WIDTHxHEIGHT pixels (smaller file
 # for the README) with Pillow when the venv has it (FULL_RES=1 keeps the 2x image).
 # Env: RERUN (viewer binary; default .venv/bin/rerun, else rerun on PATH), RERUN_RENDERER (vulkan | gl),

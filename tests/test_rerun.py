@@ -1,4 +1,4 @@
-"""Rerun recordings: policy rollouts (lerobot_efm.scripts.rollout) and hindsight samples
+"""Rerun recordings: policy rollouts (lerobot_efm.scripts.log_rollouts) and hindsight samples
 (lerobot_efm.scripts.log_dataset) written to .rrd files, then read back with rerun's own reader."""
 
 import numpy as np
@@ -10,7 +10,7 @@ from rerun.experimental import RrdReader
 from test_lerobot_cli import train
 
 from lerobot_efm.envs.talos_kitchen.env import STATE_NAMES, TalosKitchenEnvConfig
-from lerobot_efm.scripts import log_dataset, rollout
+from lerobot_efm.scripts import log_dataset, log_rollouts
 from lerobot_efm.viz import RolloutLogger, get_env_viz, read_rrd
 
 
@@ -79,11 +79,11 @@ def check_episode(data, i, length, n_action_steps, num_candidates=None):
 )
 def test_rollout_rrd(checkpoints, tmp_path, policy_type, limit, num_candidates):
     output = tmp_path / "rollout.rrd"
-    results = rollout.main(
+    results = log_rollouts.main(
         [
             f"--policy.path={checkpoints[policy_type]}",
             "--env.type=efm_point_reach",
-            "--n_episodes=2",
+            "--eval.n_episodes=2",
             f"--output={output}",
             "--seed=3",
             limit,
@@ -144,8 +144,8 @@ def test_log_dataset_rrd(state_dataset, state_dataset_root, tmp_path, policy_typ
     output = tmp_path / "samples.rrd"
     logged = log_dataset.main(
         [
-            f"--repo_id={REPO_ID}",
-            f"--root={state_dataset_root}",
+            f"--dataset.repo_id={REPO_ID}",
+            f"--dataset.root={state_dataset_root}",
             f"--policy.type={policy_type}",
             "--policy.device=cpu",
             "--policy.max_goal_distance=40",
@@ -187,8 +187,8 @@ def test_log_dataset_with_video(video_dataset_root, tmp_path):
     output = tmp_path / "video_samples.rrd"
     log_dataset.main(
         [
-            f"--repo_id={REPO_ID}",
-            f"--root={video_dataset_root}",
+            f"--dataset.repo_id={REPO_ID}",
+            f"--dataset.root={video_dataset_root}",
             "--policy.type=efm_pc",
             "--policy.device=cpu",
             "--policy.max_goal_distance=20",
@@ -253,16 +253,16 @@ def test_talos_hand_slices_follow_the_state_names():
 
 
 def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
-    """lerobot-efm-rollout in the MuJoCo Talos kitchen: hand trajectories, predicted chunks and object states."""
+    """lerobot-efm-log-rollouts in the MuJoCo Talos kitchen: hand trajectories, predicted chunks and object states."""
     output, length = tmp_path / "talos.rrd", 12
-    results = rollout.main(
+    results = log_rollouts.main(
         [
             f"--policy.path={talos_checkpoint}",
             "--env.type=talos_kitchen",
             "--env.task=open_door",
             "--env.image_size=32",
             f"--env.episode_length={length}",
-            "--n_episodes=1",
+            "--eval.n_episodes=1",
             f"--output={output}",
         ]
     )

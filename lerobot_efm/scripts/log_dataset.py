@@ -1,6 +1,6 @@
 """Log hindsight-goal samples of a LeRobot dataset to a rerun ``.rrd`` file, to check goals and strides.
 
-    python -m lerobot_efm.scripts.log_dataset --repo_id=local/efm_point_play --root=data/play \\
+    lerobot-efm-log-dataset --dataset.repo_id=local/efm_point_play --dataset.root=data/play \\
         --policy.type=efm_ps --policy.obs_traj_len=3 --policy.obs_traj_stride=10 --policy.max_goal_distance=600 \\
         --num_samples=16 --output=samples.rrd
     rerun samples.rrd
@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from lerobot.configs import parser
+from lerobot.configs.default import DatasetConfig
 from lerobot.configs.policies import PreTrainedConfig
 
 import lerobot_efm  # noqa: F401  (registers the efm_* policies)
@@ -27,8 +28,7 @@ logger = logging.getLogger(__name__)
 
 @dataclass
 class LogDatasetConfig:
-    repo_id: str
-    root: Path | None = None
+    dataset: DatasetConfig  # LeRobot's --dataset.repo_id / --dataset.root / --dataset.video_backend
     # Hindsight sampling parameters: --policy.type=efm_ps --policy.obs_traj_stride=... or --policy.path=<ckpt>.
     policy: PreTrainedConfig | None = None
     # Which env's geometry hook draws states/actions (lerobot_efm.viz.register_env_viz); default: first 3 dims.
@@ -66,7 +66,10 @@ def log_dataset(cfg: LogDatasetConfig) -> list[dict]:
     from ..viz.dataset_log import log_hindsight_samples, samples_blueprint
     from ..viz.rollout_log import get_env_viz
 
-    base = LeRobotDataset(cfg.repo_id, root=cfg.root)
+    data = cfg.dataset
+    base = LeRobotDataset(
+        data.repo_id, root=data.root, revision=data.revision, video_backend=data.video_backend
+    )
     dataset = HindsightGoalDataset(base, HindsightSpec.from_config(cfg.policy))
     rng = np.random.default_rng(cfg.seed)
     n = min(cfg.num_samples, len(dataset))
@@ -77,7 +80,7 @@ def log_dataset(cfg: LogDatasetConfig) -> list[dict]:
     output.parent.mkdir(parents=True, exist_ok=True)
     rec = rr.RecordingStream(cfg.application_id)
     rec.save(output)
-    rec.send_recording_name(f"hindsight samples of {cfg.repo_id} ({cfg.policy.type})")
+    rec.send_recording_name(f"hindsight samples of {cfg.dataset.repo_id} ({cfg.policy.type})")
     try:
         logged = log_hindsight_samples(rec, dataset, indices, get_env_viz(cfg.env_type))
         cameras = sorted(

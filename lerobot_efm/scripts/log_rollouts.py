@@ -1,8 +1,13 @@
-"""Roll a trained policy out in an env and record everything to a rerun ``.rrd`` file (no viewer).
+"""``lerobot-efm-log-rollouts``: roll a trained policy out in a simulated env and write everything to a rerun
+``.rrd`` file (no viewer). Not a deployment: that is LeRobot's own ``lerobot-rollout`` (a real or simulated
+robot); this is ``lerobot-eval`` with a rerun log, one episode after another.
 
-    python -m lerobot_efm.scripts.rollout --policy.path=outputs/train/.../pretrained_model \\
-        --env.type=efm_point_reach --env.task=around_wall --n_episodes=2 --output=rollout.rrd
+    lerobot-efm-log-rollouts --policy.path=outputs/train/.../pretrained_model \\
+        --env.type=efm_point_reach --env.task=around_wall --eval.n_episodes=2 --output=rollout.rrd
     rerun rollout.rrd        # view it later, anywhere
+
+Flags are lerobot-eval's (``--env.*``, ``--policy.*``, ``--eval.n_episodes``, ``--seed``); episodes run one at
+a time (``--eval.batch_size`` does not apply: each step is logged as it happens).
 
 The loop is lerobot-eval's (``preprocess_observation`` -> env preprocessor -> policy preprocessor ->
 ``select_action`` -> postprocessor -> env postprocessor -> ``env.step``) with one env, synchronously. What
@@ -10,13 +15,14 @@ is logged is described in :mod:`lerobot_efm.viz.rollout_log`.
 """
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
 from lerobot import envs as lerobot_envs
 from lerobot.configs import parser
+from lerobot.configs.default import EvalConfig
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.utils.constants import ACTION
 
@@ -34,7 +40,7 @@ class RolloutConfig:
     policy: PreTrainedConfig | None = None
     # The .rrd file written.
     output: Path = Path("outputs/rollout.rrd")
-    n_episodes: int = 1
+    eval: EvalConfig = field(default_factory=lambda: EvalConfig(n_episodes=1, batch_size=1))
     seed: int = 1000
     # Stop an episode after this many steps (default: the env's own limit).
     max_steps: int | None = None
@@ -51,8 +57,8 @@ class RolloutConfig:
             self.policy.pretrained_path = Path(policy_path)
         if self.policy is None or getattr(self.policy, "pretrained_path", None) is None:
             raise ValueError("Give the trained policy with --policy.path=<checkpoint>/pretrained_model.")
-        if self.n_episodes < 1:
-            raise ValueError(f"n_episodes must be >= 1, got {self.n_episodes}.")
+        if self.eval.n_episodes < 1:
+            raise ValueError(f"--eval.n_episodes must be >= 1, got {self.eval.n_episodes}.")
 
     @classmethod
     def __get_path_fields__(cls) -> list[str]:
@@ -174,7 +180,7 @@ def run_episode(
 
 
 def rollout(cfg: RolloutConfig) -> list[dict]:
-    """Build env, policy and processors like lerobot-eval, run ``cfg.n_episodes`` and save ``cfg.output``."""
+    """Build env, policy and processors like lerobot-eval, run ``cfg.eval.n_episodes`` and save ``cfg.output``."""
     import rerun as rr
     from lerobot.envs.factory import make_env, make_env_pre_post_processors
     from lerobot.policies import make_policy, make_pre_post_processors
@@ -208,9 +214,9 @@ def rollout(cfg: RolloutConfig) -> list[dict]:
             # The layout goes early (cameras are known after the first step), not at the end: a viewer that opens
             # the file while it is written, or a headless screenshot, shows it at once.
             def send_layout():
-                rec.send_blueprint(log.blueprint(list(range(cfg.n_episodes))))
+                rec.send_blueprint(log.blueprint(list(range(cfg.eval.n_episodes))))
 
-            for i in range(cfg.n_episodes):
+            for i in range(cfg.eval.n_episodes):
                 results.append(
                     run_episode(
                         env,
@@ -248,7 +254,7 @@ def rollout_main(cfg: RolloutConfig) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> list[dict] | None:
     """Console entry point; ``main([...])`` runs in-process with those CLI arguments and returns the summaries."""
-    return run_cli(rollout_main, argv, "rollout")
+    return run_cli(rollout_main, argv, "lerobot-efm-log-rollouts")
 
 
 if __name__ == "__main__":
