@@ -147,7 +147,7 @@ def _goal_frame_clear_of_the_disc(states: np.ndarray) -> int:
 
 def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
     """The deployment workflow a user follows, checked on the simulator's state: record hand-only play with
-    lerobot-record, train efm_gc with lerobot-train, export a frame as the goal with lerobot-efm-goal, and let
+    lerobot-record, train efm_gc (600 steps) with lerobot-train, export a frame as the goal with lerobot-efm-goal, and let
     lerobot-rollout (episodic: it records what the robot does) drive the hand there, the disc untouched."""
     from safetensors.torch import load_file
 
@@ -169,13 +169,13 @@ def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
         "--dataset.single_task=reach",
         "--dataset.fps=100",
         "--dataset.num_episodes=1",
-        "--dataset.episode_time_s=20",
+        "--dataset.episode_time_s=15",
         "--dataset.reset_time_s=0",
         "--dataset.push_to_hub=false",
         "--play_sounds=false",
     )
     states = np.stack(LeRobotDataset("local/hand_play", root=data).hf_dataset["observation.state"])
-    assert len(states) > 1000 and np.ptp(states[:, 2:], axis=0).max() == 0.0  # the disc was never touched
+    assert len(states) > 800 and np.ptp(states[:, 2:], axis=0).max() == 0.0  # the disc was never touched
 
     run(
         "lerobot-train",
@@ -191,12 +191,13 @@ def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
         "--policy.unet_down_dims=[16,32,32]",
         "--policy.unet_n_groups=4",
         "--policy.num_inference_steps=5",
+        "--policy.optimizer_lr=5e-4",
         "--wandb.enable=false",
         "--num_workers=0",
         "--batch_size=64",
         "--log_freq=500",
-        "--steps=1000",
-        "--save_freq=1000",
+        "--steps=600",
+        "--save_freq=600",
         timeout=600,
     )
     frame = _goal_frame_clear_of_the_disc(states)
