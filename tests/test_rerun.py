@@ -6,6 +6,7 @@ import pytest
 import rerun as rr
 import torch
 from conftest import REPO_ID, tiny_config
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from rerun.experimental import RrdReader
 from test_lerobot_cli import train
 
@@ -301,3 +302,39 @@ def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
     assert abs(scalars(data[f"{ep}/objects/door"])[0, 0]) < 0.05
     assert "scene/table" in data and "scene/workspace" in data
     assert len(RrdReader(output).blueprints()) == 1
+
+
+def test_planar_push_is_drawn_as_effector_disc_and_walls(tmp_path):
+    """Planar push states are [eff_x, eff_y, obj_x, obj_y]: two points on the maze floor (not one xyz point),
+    the maze's walls as boxes."""
+    from lerobot_efm.envs.planar_push.demonstrators import record_planar_push_dataset
+    from lerobot_efm.envs.planar_push.maze import wall_boxes
+
+    root = tmp_path / "push"
+    record_planar_push_dataset("full", root, 120, repo_id="local/push_viz")
+    output = tmp_path / "samples.rrd"
+    logged = log_dataset.main(
+        [
+            "--dataset.repo_id=local/push_viz",
+            f"--dataset.root={root}",
+            "--env_type=planar_push",
+            "--policy.type=efm_ac",
+            "--policy.device=cpu",
+            "--policy.max_goal_distance=40",
+            "--num_samples=3",
+            f"--output={output}",
+        ]
+    )
+    states = np.array(LeRobotDataset("local/push_viz", root=root).hf_dataset["observation.state"], np.float32)
+    data = read_rrd(output)
+    for s in logged:
+        points = np.array(data[f"sample_{s['sample']}/world/obs"][0]["Points3D:positions"])
+        np.testing.assert_allclose(points[:, :2], states[s["row"]].reshape(2, 2), atol=1e-6)
+        assert np.all(points[:, 2] == 0.0)
+    scene = tmp_path / "scene.rrd"
+    rec = rr.RecordingStream("scene_test")
+    rec.save(scene)
+    get_env_viz("planar_push").scene(rec)
+    rec.flush()
+    boxes = read_rrd(scene)["scene/walls"][0]
+    assert len(boxes["Boxes3D:centers"]) == len(wall_boxes())

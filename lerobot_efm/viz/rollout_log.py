@@ -37,6 +37,7 @@ Env-specific geometry is a hook: :func:`register_env_viz` maps an env type (``--
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -264,7 +265,14 @@ def register_env_viz(env_type: str, viz: EnvViz) -> None:
     _ENV_VIZ[env_type] = viz
 
 
+# Geometry kept next to its env, imported on first use (module:attribute).
+_LAZY_ENV_VIZ = {"planar_push": "lerobot_efm.envs.planar_push.viz:PLANAR_PUSH_VIZ"}
+
+
 def get_env_viz(env_type: str | None) -> EnvViz:
+    if env_type in _LAZY_ENV_VIZ and env_type not in _ENV_VIZ:
+        module, attr = _LAZY_ENV_VIZ[env_type].split(":")
+        _ENV_VIZ[env_type] = getattr(importlib.import_module(module), attr)
     return _ENV_VIZ.get(env_type or "", DEFAULT_ENV_VIZ)
 
 
