@@ -338,3 +338,9 @@ def test_planar_push_is_drawn_as_effector_disc_and_walls(tmp_path):
     rec.flush()
     boxes = read_rrd(scene)["scene/walls"][0]
     assert len(boxes["Boxes3D:centers"]) == len(wall_boxes())
+
+
+def test_ogbench_actions_are_velocities_not_drawn_as_points():
+    viz = get_env_viz("ogbench")
+    assert viz.action_points is None
+    np.testing.assert_allclose(viz.state_points(np.array([[1.5, -2.0]]))["agent"], [[1.5, -2.0, 0.0]])

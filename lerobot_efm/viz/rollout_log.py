@@ -266,7 +266,10 @@ def register_env_viz(env_type: str, viz: EnvViz) -> None:
 
 
 # Geometry kept next to its env, imported on first use (module:attribute).
-_LAZY_ENV_VIZ = {"planar_push": "lerobot_efm.envs.planar_push.viz:PLANAR_PUSH_VIZ"}
+_LAZY_ENV_VIZ = {
+    "planar_push": "lerobot_efm.envs.planar_push.viz:PLANAR_PUSH_VIZ",
+    "ogbench": "lerobot_efm.ogbench.viz:OGBENCH_VIZ",
+}
 
 
 def get_env_viz(env_type: str | None) -> EnvViz:
