@@ -344,3 +344,28 @@ def test_ogbench_actions_are_velocities_not_drawn_as_points():
     viz = get_env_viz("ogbench")
     assert viz.action_points is None
     np.testing.assert_allclose(viz.state_points(np.array([[1.5, -2.0]]))["agent"], [[1.5, -2.0, 0.0]])
+
+
+def test_unnormalize_inverts_the_policy_preprocessor(state_dataset):
+    """Planned states and chunks are drawn in raw units through LeRobot's public UnnormalizerProcessorStep built
+    from the pre-processor's own normaliser (its state dict), not through private helpers."""
+    import copy
+
+    from lerobot.policies.factory import make_policy, make_pre_post_processors
+
+    from lerobot_efm.hindsight import HindsightGoalDataset
+    from lerobot_efm.viz.rollout_log import unnormalize
+
+    cfg = tiny_config("efm_ac")
+    wrapped = HindsightGoalDataset(state_dataset, cfg)
+    make_policy(cfg, ds_meta=wrapped.meta)  # fills the config's features, as lerobot-train does
+    stats = copy.deepcopy(wrapped.meta.stats)
+    for key in [k for k in stats if k.endswith("state") or k == "action"]:  # not the identity
+        stats[key]["min"], stats[key]["max"] = np.array([0.0, -1.0]), np.array([2.0, 3.0])
+    pre, post = make_pre_post_processors(cfg, dataset_stats=stats)
+    raw = torch.tensor([[0.3, -0.2], [-0.5, 0.1]])
+    normalized = pre({"observation.state": raw, "observation.goal.state": raw})["observation.state"]
+    assert not torch.allclose(normalized, raw)
+    torch.testing.assert_close(unnormalize(pre, "observation.state", normalized), raw)
+    action = torch.tensor([[0.2, -0.4]])
+    torch.testing.assert_close(unnormalize(pre, "action", action), post(action))

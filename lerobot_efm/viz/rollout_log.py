@@ -314,21 +314,33 @@ def _normalizer_step(preprocessor):
     return None
 
 
+_INVERSES: dict[int, tuple] = {}  # id(normaliser step) -> (step, its inverse): built once per pipeline
+
+
+def _inverse_of(step):
+    """LeRobot's public inverse of a normaliser step: an UnnormalizerProcessorStep with the same features, modes
+    and statistics (its state dict)."""
+    from lerobot.processor import UnnormalizerProcessorStep
+
+    if id(step) not in _INVERSES:
+        inverse = UnnormalizerProcessorStep(features=step.features, norm_map=step.norm_map, eps=step.eps)
+        inverse.load_state_dict(step.state_dict())
+        _INVERSES[id(step)] = (step, inverse)
+    return _INVERSES[id(step)][1]
+
+
 def unnormalize(preprocessor, key: str, x: torch.Tensor) -> torch.Tensor:
     """Inverse of the policy preprocessor's normalisation of ``key`` (identity when it has none)."""
-    from lerobot.configs.types import FeatureType
+    from lerobot.processor import TransitionKey
+    from lerobot.processor.converters import create_transition
 
     step = _normalizer_step(preprocessor)
     if step is None:
         return x
-    ft = FeatureType.ACTION if key == "action" else FeatureType.STATE
-    feature = step.features.get(key)
-    if feature is not None:
-        ft = feature.type
-    stats = step._tensor_stats.get(key)
-    if stats:
-        x = x.to(next(iter(stats.values())).device)
-    return step._apply_transform(x, key, ft, inverse=True)
+    inverse = _inverse_of(step)
+    if key == "action":
+        return inverse(create_transition(action=x))[TransitionKey.ACTION]
+    return inverse(create_transition(observation={key: x}))[TransitionKey.OBSERVATION][key]
 
 
 def latent_to_states(policy, preprocessor, latent: torch.Tensor) -> dict[str, np.ndarray] | None:
