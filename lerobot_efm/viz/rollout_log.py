@@ -400,6 +400,7 @@ class RolloutLogger:
         self.episodes: list[dict] = []
         self.cameras: set[str] = set()
         self.goal_cameras: set[str] = set()
+        self._goal_images: dict[str, np.ndarray] = {}  # the goal image last logged per camera, this episode
         self._static_done: set[str] = set()
         if self.viz.scene is not None:
             self.viz.scene(rec)
@@ -436,6 +437,7 @@ class RolloutLogger:
             {"index": int(index), "path": {}, "length": None, "success": None, "task": task, "seed": seed}
         )
         self.set_step(0)
+        self._goal_images = {}
         self.rec.log(f"{self.ep}/events", rr.TextLog(f"episode {index} starts (task={task!r}, seed={seed})"))
 
     def log_render(self, step: int, frame) -> None:
@@ -504,8 +506,9 @@ class RolloutLogger:
             if key.startswith(GOAL_IMAGE_PREFIX):
                 cam = key[len(GOAL_IMAGE_PREFIX) :]
                 img = to_hwc_uint8(value)
-                if img is not None:
-                    self.goal_cameras.add(cam)
+                if img is not None and not np.array_equal(img, self._goal_images.get(cam)):
+                    self.goal_cameras.add(cam)  # logged when it changes (a goal sequence), not every step
+                    self._goal_images[cam] = img
                     self.rec.log(f"{ep}/goal/{cam}", rr.Image(img))
             elif key.startswith(IMAGE_PREFIX):
                 cam = key[len(IMAGE_PREFIX) :]
