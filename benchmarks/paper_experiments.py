@@ -113,6 +113,9 @@ PLANAR_PAPER_ROWS = {
 PLANAR_DATASETS = ("expert", "full", "partitioned")
 # Paper dataset sizes (frames of mouse teleoperation at 20 Hz): reach_goal / play_full / play_stitch.
 PLANAR_FRAMES = {"expert": 46_793, "full": 36_661, "partitioned": 29_087}
+# Recorder options pinned per dataset: the committed partitioned cells were run on play recorded before wall
+# slides became the default (PLAY_WALL_SLIDES; measured on full play only so far).
+PLANAR_OPTIONS = {"partitioned": ["wall_slides=0"]}
 OGBENCH_DATASETS = tuple(OGBENCH_PAPER)
 
 SUITES: dict[str, Suite] = {
@@ -260,6 +263,7 @@ def generate_command(suite: str, dataset: str, root: Path, spec: DataSpec) -> li
         str(frames),
         "--repo-id",
         dataset_repo_id(suite, dataset),
+        *[arg for option in PLANAR_OPTIONS.get(dataset, []) for arg in ("--option", option)],
     ]
 
 

@@ -300,7 +300,9 @@ def test_play_pushes_fast_and_keeps_the_hand_near_the_disc(env):
     speed = np.concatenate([np.linalg.norm(np.diff(s[:, 2:], axis=0), axis=1) * FPS for s in states])
     assert speed[speed > 0.02].mean() > 0.33, speed[speed > 0.02].mean()
     hand_to_disc = np.concatenate([np.linalg.norm(s[:, :2] - s[:, 2:], axis=1) for s in states])
-    assert hand_to_disc.max() < 0.9, hand_to_disc.max()
+    # 95th percentile, not the max: going around a wall to the staging point behind the disc may take the hand
+    # further for a moment (3 x 800 frames: 0.59 at the 95th, 1.09 when effector moves may go anywhere)
+    assert np.percentile(hand_to_disc, 95) < 0.8, np.percentile(hand_to_disc, 95)
     with pytest.raises(ValueError, match="min_lead"):
         PlayFullSpace(env, np.random.default_rng(0), min_lead=0.2)
 

@@ -107,8 +107,9 @@ VIA_TOL = 0.02  # the disc stops this close to such a via point, lined up for th
 # leg: a wedged disc ends it), ~30 in the whole full-play recording against the expert's ~175; rollouts carried
 # the disc to the goal's wall and stopped short. Humans also slide a disc along a wall towards a corner and stop
 # before it: a share PLAY_WALL_SLIDES of the wall legs line the disc up WALL_SLIDE_FROM from a corner and slide
-# it to WALL_SLIDE_TO from it, where the hand still fits between disc and corner (diameter 0.15).
-PLAY_WALL_SLIDES = 0.0
+# it to WALL_SLIDE_TO from it, where the hand still fits between disc and corner (diameter 0.15). Full play,
+# FM-AC no-RL, same config and budget: 12/24/16/22 % at 3k/6k/9k/12k steps without, 14/14/38/30 with 0.6.
+PLAY_WALL_SLIDES = 0.6
 WALL_SLIDE_FROM = (0.4, 0.7)
 WALL_SLIDE_TO = (0.18, 0.3)
 SLIDE_TILT = 0.08  # a slide pushes this much into its wall (isotropic friction: else it may stop short of it)
