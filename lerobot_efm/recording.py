@@ -45,6 +45,7 @@ OPERATORS: dict[tuple[str, str], str] = {
     ("planar_push", "expert"): "lerobot_efm.envs.planar_push.demonstrators:ExpertReachGoal",
     ("planar_push", "full"): "lerobot_efm.envs.planar_push.demonstrators:PlayFullSpace",
     ("planar_push", "partitioned"): "lerobot_efm.envs.planar_push.demonstrators:PlayPartitioned",
+    ("planar_push", "hand"): "lerobot_efm.envs.planar_push.demonstrators:PlayHandOnly",
 }
 
 
@@ -134,23 +135,21 @@ class _Interrupt(Exception):
 
 
 class _InterruptGuard:
-    """Turns SIGINT/SIGTERM into :class:`_Interrupt`, except while an episode is being written.
+    """Notes SIGINT/SIGTERM; the recording loop raises :class:`_Interrupt` at its next frame or after the save.
 
-    ``save_episode`` consumes the episode buffer as it writes parquet, videos and metadata; a signal
-    in the middle would leave a half-written episode. Inside ``saving()`` a signal is only noted and
-    raised once the episode is complete, so an interrupt costs at most the unfinished episode.
+    The handler never raises itself: an exception thrown into whatever code runs when the signal lands can be
+    swallowed there (a logging handler catches it and recording went on: a test hung on it) or leave a
+    half-written episode (``save_episode`` consumes the episode buffer as it writes parquet, videos and metadata).
+    Checked once per frame, an interrupt costs at most the unfinished episode.
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self):
-        self.in_save, self.pending, self.previous = False, None, {}
+        self.pending, self.previous = None, {}
 
     def _handle(self, signum, frame):  # noqa: ARG002
-        if self.in_save:
-            self.pending = signum
-        else:
-            raise _Interrupt(f"signal {signum}")
+        self.pending = signum
 
     def __enter__(self):
         self.previous = {sig: signal.signal(sig, self._handle) for sig in self.SIGNALS}
@@ -159,14 +158,6 @@ class _InterruptGuard:
     def __exit__(self, *exc):
         for sig, handler in self.previous.items():
             signal.signal(sig, handler)
-
-    @contextmanager
-    def saving(self):
-        self.in_save = True
-        try:
-            yield
-        finally:
-            self.in_save = False
 
     def raise_pending(self):
         if self.pending is not None:
@@ -200,6 +191,7 @@ def record_episodes(
                 obs = operator.reset()
                 n = 0
                 while n < episode_length and not (n > 0 and operator.done):
+                    guard.raise_pending()
                     action = np.asarray(operator.act(obs), dtype=np.float32)
                     if not np.all(np.isfinite(action)):
                         raise ValueError(f"operator returned a non-finite action {action} at frame {n}")
@@ -208,7 +200,7 @@ def record_episodes(
                     )
                     obs, *_ = env.step(action)
                     n += 1
-                with guard.saving(), SuppressProgressBars():
+                with SuppressProgressBars():
                     dataset.save_episode()
                     seal_episode_files(dataset)  # on disk, a complete dataset even after a SIGKILL
                 saved = True

@@ -285,3 +285,44 @@ def test_lerobot_style_dataset_flags_are_checked():
         timeout=120,
     )
     assert proc.returncode != 0 and "--dataset.repo_id and --dataset.root are required" in proc.stderr
+
+
+def test_operators_are_draccus_choices_with_their_own_options(tmp_path):
+    """--operator.type picks a registered operator, --operator.<option> sets its keyword options (defaults from
+    its signature); an operator of another env is refused with the env's list."""
+    args = [
+        *RECORD,
+        "--env.type=planar_push",
+        "--dataset.repo_id=local/op_test",
+        f"--dataset.root={tmp_path / 'ds'}",
+        "--dataset.num_episodes=1",
+        "--dataset.episode_time_s=2",
+        "--dataset.push_to_hub=false",
+    ]
+    subprocess.run(
+        [*args, "--operator.type=planar_push_hand", "--operator.pause_share=0.0"],
+        check=True,
+        env=ENV,
+        capture_output=True,
+        timeout=300,
+    )
+    states = np.stack(LeRobotDataset("local/op_test", root=tmp_path / "ds").hf_dataset["observation.state"])
+    assert (
+        np.ptp(states[:, 2:], axis=0).max() < 1e-6 and np.ptp(states[:, :2], axis=0).max() > 0.05
+    )  # the hand
+    wrong = subprocess.run(
+        [
+            *[a for a in args if not a.startswith("--dataset.root")],
+            f"--dataset.root={tmp_path / 'other'}",
+            "--operator.type=talos_kitchen_play",
+        ],
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert (
+        wrong.returncode != 0
+        and "planar_push_full" in wrong.stderr
+        and "not --env.type=planar_push" in wrong.stderr
+    )

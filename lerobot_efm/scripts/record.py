@@ -21,23 +21,26 @@ from lerobot.configs.dataset import DatasetRecordConfig
 from lerobot.envs.configs import EnvConfig
 
 from lerobot_efm.dataset_card import recording_card_kwargs
+from lerobot_efm.operators import OperatorConfig, default_operator, register_operators
 from lerobot_efm.recording import (
     dataset_features,
     finalizing,
     flatten_observation,
     make_raw_env,
     open_dataset,
-    operator_class,
     record_episodes,
 )
 from lerobot_efm.scripts import run_cli
+
+registered = register_operators()  # before the CLI is parsed: --operator.type choices
 
 
 @dataclass
 class RecordConfig:
     env: EnvConfig
     dataset: DatasetRecordConfig
-    operator: str = "play"  # name registered for the env type in lerobot_efm.recording.OPERATORS
+    # --operator.type=<name> --operator.<option>=...; default: the env's play operator
+    operator: OperatorConfig | None = None
     seed: int = 0
     resume: bool = False  # append to the dataset already at --dataset.root
 
@@ -57,7 +60,14 @@ class RecordConfig:
 def record(cfg: RecordConfig):
     env = make_raw_env(cfg.env)
     rng = np.random.default_rng(cfg.seed)
-    operator = operator_class(cfg.env.type, cfg.operator)(env, rng)
+    chosen = cfg.operator or default_operator(cfg.env.type)
+    if chosen.env_type != cfg.env.type:
+        valid = sorted(c for c in registered if OperatorConfig.get_choice_class(c).env_type == cfg.env.type)
+        raise ValueError(
+            f"--operator.type={chosen.type} records {chosen.env_type}, not --env.type={cfg.env.type}; "
+            f"its operators: {valid}"
+        )
+    operator = chosen.build(env, rng)
     env.reset(seed=cfg.seed)
     first = flatten_observation(operator.reset(), cfg.env.features_map)
     names = getattr(env, "feature_names", None)
@@ -106,7 +116,7 @@ def record(cfg: RecordConfig):
     for line in stats.failed:
         logging.warning("dropped %s", line)
     if data.push_to_hub:
-        card = recording_card_kwargs(cfg.env.type, cfg.operator)
+        card = recording_card_kwargs(cfg.env.type, chosen.name)
         card["tags"] = sorted(set(card["tags"]) | set(data.tags or []))
         dataset.push_to_hub(private=data.private, **card)
     if stats.interrupted:
