@@ -10,7 +10,6 @@ registered (its name is then refused with the list of those that are).
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import inspect
 import types
 import typing
@@ -19,7 +18,7 @@ from typing import ClassVar
 
 import draccus
 
-from .recording import OPERATORS
+from .recording import OPERATORS, operator_class
 
 SCALARS = (bool, int, float, str)
 
@@ -30,7 +29,6 @@ class OperatorConfig(draccus.ChoiceRegistry):
 
     env_type: ClassVar[str] = ""
     name: ClassVar[str] = ""  # its name among the env's operators (lerobot_efm.recording.OPERATORS)
-    target: ClassVar[str] = ""  # "module:Class"
 
     @property
     def type(self) -> str:
@@ -40,8 +38,7 @@ class OperatorConfig(draccus.ChoiceRegistry):
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
     def build(self, env, rng):
-        module, name = self.target.split(":")
-        return getattr(importlib.import_module(module), name)(env, rng, **self.options())
+        return operator_class(self.env_type, self.name)(env, rng, **self.options())
 
 
 def choice_name(env_type: str, name: str) -> str:
@@ -78,18 +75,19 @@ def _options_of(cls) -> list[tuple[str, object, dataclasses.Field]]:
 def register_operators() -> list[str]:
     """Register every operator whose module imports; returns the registered choice names."""
     names = []
-    for (env_type, name), target in OPERATORS.items():
+    for env_type, name in OPERATORS:
         choice = choice_name(env_type, name)
         if choice in OperatorConfig.get_known_choices():
             names.append(choice)
             continue
-        module, cls_name = target.split(":")
         try:
-            cls = getattr(importlib.import_module(module), cls_name)
+            cls = operator_class(env_type, name)
         except ImportError:  # its simulator's extra is not installed
             continue
-        config = dataclasses.make_dataclass(f"{cls_name}Config", _options_of(cls), bases=(OperatorConfig,))
-        config.env_type, config.name, config.target, config.__doc__ = env_type, name, target, cls.__doc__
+        config = dataclasses.make_dataclass(
+            f"{cls.__name__}Config", _options_of(cls), bases=(OperatorConfig,)
+        )
+        config.env_type, config.name, config.__doc__ = env_type, name, cls.__doc__
         OperatorConfig.register_subclass(choice)(config)
         names.append(choice)
     return names
