@@ -13,28 +13,21 @@ Datasets hold what a LeRobot recording holds: ``observation.*`` (cameras as vide
 ``action`` and a task string; no goals (hindsight relabelling makes them at train time).
 
 Nothing already saved is lost when recording stops early: an exception in one episode drops that
-episode's frames and recording goes on with the next; Ctrl-C or SIGTERM drop the unfinished episode
-and finalize the dataset (closing its parquet files), so the saved episodes stay readable and
-``--resume=true`` appends to them. Only a hard kill (SIGKILL, power loss) can corrupt the files
-being written.
+episode's frames and recording goes on with the next; Ctrl-C, SIGTERM and even SIGKILL keep every saved
+episode (:class:`lerobot_efm.dataset_writer.EpisodeWriter`) and ``--resume=true`` appends to them.
 """
 
 from __future__ import annotations
 
 import importlib
 import logging
-import signal
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from lerobot.datasets.lerobot_dataset import LeRobotDataset
-from lerobot.utils.utils import SuppressProgressBars
 
-from .crash_safe import repair_dataset, seal_episode_files
+from .dataset_writer import EpisodeWriter, RecordingInterrupted, camera_feature, vector_feature
 
 GOAL_KEY_PREFIX = "goal."  # goal observations of the env: not recorded (hindsight makes goals)
 
@@ -102,23 +95,20 @@ def dataset_features(
         if key.startswith("observation.images."):
             if value.ndim != 3 or value.shape[-1] != 3 or value.dtype != np.uint8:
                 raise ValueError(f"Camera {key!r} must be (H, W, 3) uint8, got {value.shape} {value.dtype}")
-            feats[key] = {
-                "dtype": "video" if use_videos else "image",
-                "shape": tuple(value.shape),
-                "names": ["height", "width", "channels"],
-            }
+            feats[key] = camera_feature(value.shape, use_videos)
         else:
-            feats[key] = {
-                "dtype": "float32",
-                "shape": tuple(value.shape),
-                "names": names.get(key) or [f"{key.rsplit('.', 1)[-1]}_{i}" for i in range(value.size)],
-            }
-    feats["action"] = {
-        "dtype": "float32",
-        "shape": (action_dim,),
-        "names": names.get("action") or [f"action_{i}" for i in range(action_dim)],
-    }
+            if value.ndim != 1:
+                raise ValueError(f"Observation {key!r} must be a vector, got shape {value.shape}")
+            feats[key] = vector_feature(_names(names, key, value.size, key.rsplit(".", 1)[-1]))
+    feats["action"] = vector_feature(_names(names, "action", action_dim, "action"))
     return feats
+
+
+def _names(names: dict[str, list[str]], key: str, size: int, stem: str) -> list[str]:
+    given = names.get(key) or [f"{stem}_{i}" for i in range(size)]
+    if len(given) != size:
+        raise ValueError(f"The env names {len(given)} entries of {key!r} ({given}), its value has {size}")
+    return list(given)
 
 
 @dataclass
@@ -130,42 +120,8 @@ class RecordStats:
     seconds: float = 0.0
 
 
-class _Interrupt(Exception):
-    """SIGINT or SIGTERM, turned into an exception so that ``finally`` blocks run."""
-
-
-class _InterruptGuard:
-    """Notes SIGINT/SIGTERM; the recording loop raises :class:`_Interrupt` at its next frame or after the save.
-
-    The handler never raises itself: an exception thrown into whatever code runs when the signal lands can be
-    swallowed there (a logging handler catches it and recording went on: a test hung on it) or leave a
-    half-written episode (``save_episode`` consumes the episode buffer as it writes parquet, videos and metadata).
-    Checked once per frame, an interrupt costs at most the unfinished episode.
-    """
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __init__(self):
-        self.pending, self.previous = None, {}
-
-    def _handle(self, signum, frame):  # noqa: ARG002
-        self.pending = signum
-
-    def __enter__(self):
-        self.previous = {sig: signal.signal(sig, self._handle) for sig in self.SIGNALS}
-        return self
-
-    def __exit__(self, *exc):
-        for sig, handler in self.previous.items():
-            signal.signal(sig, handler)
-
-    def raise_pending(self):
-        if self.pending is not None:
-            raise _Interrupt(f"signal {self.pending}")
-
-
 def record_episodes(
-    dataset: LeRobotDataset,
+    writer: EpisodeWriter,
     env: gym.Env,
     operator,
     features_map: dict[str, str],
@@ -177,107 +133,51 @@ def record_episodes(
     max_failures: int = 3,
     on_episode=None,
 ) -> RecordStats:
-    """Record ``episodes`` episodes of at most ``episode_length`` frames into ``dataset``.
+    """Record ``episodes`` episodes of at most ``episode_length`` frames through ``writer``.
 
     Each frame is (observation before the action, action). A failing episode is dropped (logged) and
-    recording goes on; ``max_failures`` failures in a row stop it. The caller finalizes the dataset.
+    recording goes on; ``max_failures`` failures in a row stop it; SIGINT/SIGTERM stop it after the saved
+    episodes (``stats.interrupted``). The caller's ``with writer:`` finalizes the dataset.
     """
     stats, failures_in_row, t0 = RecordStats(), 0, time.perf_counter()
-    with _InterruptGuard() as guard:
-        for ep in range(episodes):
-            saved = False
-            try:
-                env.reset(seed=seed + ep)
-                obs = operator.reset()
-                n = 0
-                while n < episode_length and not (n > 0 and operator.done):
-                    guard.raise_pending()
-                    action = np.asarray(operator.act(obs), dtype=np.float32)
-                    if not np.all(np.isfinite(action)):
-                        raise ValueError(f"operator returned a non-finite action {action} at frame {n}")
-                    dataset.add_frame(
-                        {**flatten_observation(obs, features_map), "action": action, "task": task}
-                    )
-                    obs, *_ = env.step(action)
-                    n += 1
-                with SuppressProgressBars():
-                    dataset.save_episode()
-                    seal_episode_files(dataset)  # on disk, a complete dataset even after a SIGKILL
-                saved = True
-                stats.saved, stats.frames = stats.saved + 1, stats.frames + n
-                guard.raise_pending()
-            except _Interrupt:
-                stats.interrupted = True
-                drop_unsaved_frames(dataset)
-                logging.warning(
-                    "Recording interrupted during episode %d (%s); %d saved episodes are kept.",
-                    ep,
-                    "saved first" if saved else "its frames are dropped",
-                    stats.saved,
-                )
+    for ep in range(episodes):
+        saved = False
+        try:
+            env.reset(seed=seed + ep)
+            obs = operator.reset()
+            n = 0
+            while n < episode_length and not (n > 0 and operator.done):
+                action = np.asarray(operator.act(obs), dtype=np.float32)
+                if not np.all(np.isfinite(action)):
+                    raise ValueError(f"operator returned a non-finite action {action} at frame {n}")
+                writer.add_frame({**flatten_observation(obs, features_map), "action": action, "task": task})
+                obs, *_ = env.step(action)
+                n += 1
+            writer.save_episode()  # sealed: on disk, a complete dataset even after a SIGKILL
+            saved = True
+            stats.saved, stats.frames = stats.saved + 1, stats.frames + n
+            writer.check_interrupt()
+        except RecordingInterrupted:
+            stats.interrupted = True
+            writer.drop_episode()
+            logging.warning(
+                "Recording interrupted during episode %d (%s); %d saved episodes are kept.",
+                ep,
+                "saved first" if saved else "its frames are dropped",
+                stats.saved,
+            )
+            break
+        except Exception as err:  # one bad episode must not lose the others
+            logging.exception("Episode %d failed and is dropped", ep)
+            stats.failed.append(f"episode {ep}: {type(err).__name__}: {err}")
+            writer.drop_episode()
+            failures_in_row += 1
+            if failures_in_row >= max_failures:
+                logging.error("%d episodes failed in a row; stopping.", failures_in_row)
                 break
-            except Exception as err:  # one bad episode must not lose the others
-                logging.exception("Episode %d failed and is dropped", ep)
-                stats.failed.append(f"episode {ep}: {type(err).__name__}: {err}")
-                drop_unsaved_frames(dataset)
-                failures_in_row += 1
-                if failures_in_row >= max_failures:
-                    logging.error("%d episodes failed in a row; stopping.", failures_in_row)
-                    break
-                continue
-            failures_in_row = 0
-            if on_episode is not None:
-                on_episode(ep, n, stats)
+            continue
+        failures_in_row = 0
+        if on_episode is not None:
+            on_episode(ep, n, stats)
     stats.seconds = time.perf_counter() - t0
     return stats
-
-
-def drop_unsaved_frames(dataset: LeRobotDataset) -> None:
-    """Forget the frames of an episode that was not saved (also one whose ``save_episode`` failed midway,
-    which leaves LeRobot's episode buffer half-consumed, without its ``size``)."""
-    buffer = dataset.writer.episode_buffer if dataset.writer is not None else None
-    if buffer is not None and buffer.get("size", 1) > 0:
-        dataset.clear_episode_buffer()
-
-
-@contextmanager
-def finalizing(dataset: LeRobotDataset):
-    """Whatever happens inside, drop the unsaved episode and finalize, so saved episodes stay readable."""
-    try:
-        yield dataset
-    finally:
-        drop_unsaved_frames(dataset)
-        dataset.finalize()
-
-
-def open_dataset(
-    root: Path, repo_id: str, fps: int, features: dict, resume: bool, robot_type: str | None, use_videos: bool
-) -> LeRobotDataset:
-    """A new dataset at ``root`` or, with ``resume``, the existing one there (features must match)."""
-    if resume:
-        if not (root / "meta" / "info.json").exists():
-            raise FileNotFoundError(f"--resume=true but {root} holds no LeRobot dataset (no meta/info.json)")
-        repair_dataset(root)  # debris of a recorder killed while saving an episode
-        ds = LeRobotDataset.resume(repo_id, root=root)
-        have = {k: tuple(v["shape"]) for k, v in ds.meta.features.items() if k in features}
-        want = {k: tuple(v["shape"]) for k, v in features.items()}
-        if have != want:
-            raise ValueError(f"Dataset at {root} has features {have}, the env produces {want}: cannot resume")
-        if ds.meta.fps != fps:
-            raise ValueError(
-                f"Dataset at {root} was recorded at {ds.meta.fps} fps, the env runs at {fps} fps"
-            )
-        return ds
-    if root.exists():
-        raise FileExistsError(
-            f"Dataset root {root} already exists; pass --resume=true to append or pick a new root"
-        )
-    return LeRobotDataset.create(
-        repo_id,
-        fps=fps,
-        features=features,
-        root=root,
-        robot_type=robot_type,
-        use_videos=use_videos,
-        metadata_buffer_size=1,
-    )

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
-from lerobot.utils.utils import SuppressProgressBars
 
+from lerobot_efm.dataset_writer import GENERATOR_SEAL_INTERVAL_S, EpisodeWriter, state_action_features
 from lerobot_efm.envs.point_reach import (
     WALL_TOP,
     in_wall,
@@ -24,7 +24,6 @@ from lerobot_efm.envs.point_reach import (
     sample_free,
     segment_hits_wall,
 )
-from lerobot_efm.recording import finalizing
 
 FPS = 20
 TASK = "play"
@@ -32,17 +31,7 @@ TASK = "play"
 
 def play_features(with_images: bool = False, image_size: int = 64) -> dict:
     """Dataset features of the play recordings (no goal keys, no rewards)."""
-    feats = {
-        "observation.state": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]},
-        "action": {"dtype": "float32", "shape": (2,), "names": ["x", "y"]},
-    }
-    if with_images:
-        feats["observation.images.top"] = {
-            "dtype": "video",
-            "shape": (image_size, image_size, 3),
-            "names": ["height", "width", "channels"],
-        }
-    return feats
+    return state_action_features(["x", "y"], ["x", "y"], {"top": image_size} if with_images else None)
 
 
 def _route(p: np.ndarray, target: np.ndarray, rng: np.random.Generator, wall: bool) -> list[np.ndarray]:
@@ -145,22 +134,23 @@ def make_point_play_dataset(
     Images (``observation.images.top``) use the same renderer as ``PointReachEnv`` observations, so
     env goal images match dataset frames. Returns the dataset reopened read-only.
     """
-    if Path(root).exists():  # LeRobot would fail later with a bare mkdir error
-        raise FileExistsError(f"Dataset root {root} already exists; pick a new root or delete it")
     rng = np.random.default_rng(seed)
-    ds = LeRobotDataset.create(
-        repo_id, fps=FPS, features=play_features(with_images, image_size), root=root, use_videos=with_images
+    features = play_features(with_images, image_size)
+    writer = EpisodeWriter.open(
+        root, repo_id, FPS, features, use_videos=with_images, seal_interval_s=GENERATOR_SEAL_INTERVAL_S
     )
-    with finalizing(ds):  # keeps the already saved episodes readable even if recording fails mid-way
+    with writer:  # keeps the already saved episodes readable even if recording fails mid-way
         for _ in range(num_episodes):
             states, actions = play_episode(rng, episode_length, wall)
-            for s, a in zip(states.astype(np.float32), actions.astype(np.float32), strict=True):
-                frame = {"observation.state": s, "action": a, "task": TASK}
-                if with_images:
-                    frame["observation.images.top"] = render_scene(s, image_size, wall)
-                ds.add_frame(frame)
-            with SuppressProgressBars():  # LeRobot shows a "Map" bar per saved episode otherwise
-                ds.save_episode()
+            writer.write_episode(
+                {
+                    "observation.state": s,
+                    "action": a,
+                    "task": TASK,
+                    **({"observation.images.top": render_scene(s, image_size, wall)} if with_images else {}),
+                }
+                for s, a in zip(states.astype(np.float32), actions.astype(np.float32), strict=True)
+            )
     return LeRobotDataset(repo_id, root=root)
 
 

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
+from lerobot_efm.dataset_writer import EpisodeWriter
 from lerobot_efm.envs.point_reach import PointReachEnvConfig
-from lerobot_efm.recording import finalizing, make_raw_env, open_dataset, operator_class, record_episodes
+from lerobot_efm.recording import make_raw_env, operator_class, record_episodes
 from lerobot_efm.synthetic import PointPlayOperator
 
 RECORD = [sys.executable, "-m", "lerobot_efm.scripts.record"]
@@ -118,14 +119,14 @@ def _point_recording(root, operator_cls, repo_id):
     env = make_raw_env(cfg)
     op = operator_cls(env, np.random.default_rng(0))
     env.reset(seed=0)
-    ds = open_dataset(root, repo_id, cfg.fps, POINT_FEATURES, False, "efm_point_reach", False)
-    return cfg, env, op, ds
+    writer = EpisodeWriter.open(root, repo_id, cfg.fps, POINT_FEATURES, use_videos=False)
+    return cfg, env, op, writer
 
 
 def test_crashing_episode_is_dropped_and_recording_goes_on(tmp_path):
-    cfg, env, op, ds = _point_recording(tmp_path / "ds", _CrashOnce, "local/crash")
-    with finalizing(ds):
-        stats = record_episodes(ds, env, op, cfg.features_map, episodes=3, episode_length=25, task="play")
+    cfg, env, op, writer = _point_recording(tmp_path / "ds", _CrashOnce, "local/crash")
+    with writer:
+        stats = record_episodes(writer, env, op, cfg.features_map, episodes=3, episode_length=25, task="play")
     assert stats.saved == 2 and len(stats.failed) == 1 and "operator bug" in stats.failed[0]
     ds = LeRobotDataset("local/crash", root=tmp_path / "ds")
     assert ds.num_episodes == 2 and ds.num_frames == 50
@@ -133,7 +134,8 @@ def test_crashing_episode_is_dropped_and_recording_goes_on(tmp_path):
 
 def test_signal_while_saving_an_episode_keeps_it_and_stops(tmp_path, monkeypatch):
     """A SIGTERM that lands inside save_episode (CI hit this) waits for the episode to be written."""
-    cfg, env, op, ds = _point_recording(tmp_path / "ds", PointPlayOperator, "local/sig")
+    cfg, env, op, writer = _point_recording(tmp_path / "ds", PointPlayOperator, "local/sig")
+    ds = writer.dataset
     real_save, calls = ds.save_episode, []
 
     def save_then_signal(*args, **kwargs):
@@ -143,8 +145,8 @@ def test_signal_while_saving_an_episode_keeps_it_and_stops(tmp_path, monkeypatch
         return real_save(*args, **kwargs)
 
     monkeypatch.setattr(ds, "save_episode", save_then_signal)
-    with finalizing(ds):
-        stats = record_episodes(ds, env, op, cfg.features_map, episodes=5, episode_length=20, task="play")
+    with writer:
+        stats = record_episodes(writer, env, op, cfg.features_map, episodes=5, episode_length=20, task="play")
     assert stats.interrupted and stats.saved == 2 and stats.frames == 40
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the recorder's handler is gone
     ds = LeRobotDataset("local/sig", root=tmp_path / "ds")

@@ -18,10 +18,9 @@ from pathlib import Path
 
 import numpy as np
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
-from lerobot.utils.utils import SuppressProgressBars
 from tqdm import tqdm
 
-from lerobot_efm.recording import finalizing
+from lerobot_efm.dataset_writer import GENERATOR_SEAL_INTERVAL_S, EpisodeWriter, state_action_features
 
 FPS = 10
 REQUIRED_KEYS = ("observations", "actions", "terminals")
@@ -68,14 +67,10 @@ def episode_bounds(terminals: np.ndarray) -> list[tuple[int, int]]:
 
 def ogbench_features(obs_dim: int, action_dim: int) -> dict:
     planar = obs_dim == 2 and action_dim == 2
-    return {
-        "observation.state": {
-            "dtype": "float32",
-            "shape": (obs_dim,),
-            "names": ["x", "y"] if planar else None,
-        },
-        "action": {"dtype": "float32", "shape": (action_dim,), "names": ["vx", "vy"] if planar else None},
-    }
+    return state_action_features(
+        ["x", "y"] if planar else [f"state_{i}" for i in range(obs_dim)],
+        ["vx", "vy"] if planar else [f"action_{i}" for i in range(action_dim)],
+    )
 
 
 def convert_arrays(
@@ -88,20 +83,18 @@ def convert_arrays(
 ) -> LeRobotDataset:
     """Write raw OGBench arrays as a new LeRobot dataset at ``root`` (must not exist); returns it reopened."""
     check_raw(data, source)
-    if Path(root).exists():  # LeRobot would fail later with a bare mkdir error
-        raise FileExistsError(f"Dataset root {root} already exists; pick a new root or delete it")
     obs = np.ascontiguousarray(data["observations"], dtype=np.float32)
     act = np.ascontiguousarray(data["actions"], dtype=np.float32)
-    ds = LeRobotDataset.create(
-        repo_id, fps=fps, features=ogbench_features(obs.shape[1], act.shape[1]), root=root, use_videos=False
+    features = ogbench_features(obs.shape[1], act.shape[1])
+    writer = EpisodeWriter.open(
+        root, repo_id, fps, features, use_videos=False, seal_interval_s=GENERATOR_SEAL_INTERVAL_S
     )
-    with finalizing(ds):  # keeps the already saved episodes readable even if conversion fails mid-way
+    with writer:  # keeps the already saved episodes readable even if conversion fails mid-way
         bounds = episode_bounds(data["terminals"])
         for start, end in tqdm(bounds, desc=f"converting to {repo_id}", unit="ep", leave=False):
-            for t in range(start, end):
-                ds.add_frame({"observation.state": obs[t], "action": act[t], "task": task})
-            with SuppressProgressBars():
-                ds.save_episode()
+            writer.write_episode(
+                {"observation.state": obs[t], "action": act[t], "task": task} for t in range(start, end)
+            )
     return LeRobotDataset(repo_id, root=root)
 
 

@@ -6,7 +6,7 @@
 The ``--dataset.*`` flags are LeRobot's own (``DatasetRecordConfig``, as in ``lerobot-record``); the frame rate
 is the env's control rate (``--dataset.fps`` and ``--dataset.reset_time_s`` do not apply to a simulator) and the
 repo id is kept as given (no date stamp: scripts and configs name it). Ctrl-C keeps every saved episode (the
-unfinished one is dropped), a SIGKILL too (:mod:`lerobot_efm.crash_safe`); ``--resume=true`` appends.
+unfinished one is dropped), a SIGKILL too (:mod:`lerobot_efm.dataset_writer`); ``--resume=true`` appends.
 """
 
 import logging
@@ -21,15 +21,9 @@ from lerobot.configs.dataset import DatasetRecordConfig
 from lerobot.envs.configs import EnvConfig
 
 from lerobot_efm.dataset_card import recording_card_kwargs
+from lerobot_efm.dataset_writer import EpisodeWriter
 from lerobot_efm.operators import OperatorConfig, default_operator, register_operators
-from lerobot_efm.recording import (
-    dataset_features,
-    finalizing,
-    flatten_observation,
-    make_raw_env,
-    open_dataset,
-    record_episodes,
-)
+from lerobot_efm.recording import dataset_features, flatten_observation, make_raw_env, record_episodes
 from lerobot_efm.scripts import run_cli
 
 registered = register_operators()  # before the CLI is parsed: --operator.type choices
@@ -73,9 +67,16 @@ def record(cfg: RecordConfig):
     names = getattr(env, "feature_names", None)
     data = cfg.dataset
     features = dataset_features(first, int(np.prod(env.action_space.shape)), names, data.video)
-    dataset = open_dataset(
-        Path(data.root), data.repo_id, cfg.env.fps, features, cfg.resume, cfg.env.type, data.video
+    writer = EpisodeWriter.open(
+        data.root,
+        data.repo_id,
+        cfg.env.fps,
+        features,
+        resume=cfg.resume,
+        robot_type=cfg.env.type,
+        use_videos=data.video,
     )
+    dataset = writer.dataset
     start = dataset.meta.total_episodes
     task = data.single_task or getattr(operator, "task", "play")
 
@@ -91,9 +92,9 @@ def record(cfg: RecordConfig):
             stats.frames / max(1e-9, time.perf_counter() - t0),
         )
 
-    with finalizing(dataset), closing(env):
+    with writer, closing(env):
         stats = record_episodes(
-            dataset,
+            writer,
             env,
             operator,
             cfg.env.features_map,

@@ -645,19 +645,13 @@ BEHAVIOURS = {
 
 
 def planar_push_features(with_images: bool = False, image_size: int = 96) -> dict:
+    from lerobot_efm.dataset_writer import state_action_features
+
     from .env import STATE_NAMES
 
-    feats = {
-        "observation.state": {"dtype": "float32", "shape": (4,), "names": list(STATE_NAMES)},
-        "action": {"dtype": "float32", "shape": (2,), "names": ["cmd_x", "cmd_y"]},
-    }
-    if with_images:
-        feats["observation.images.top"] = {
-            "dtype": "video",
-            "shape": (image_size, image_size, 3),
-            "names": ["height", "width", "channels"],
-        }
-    return feats
+    return state_action_features(
+        STATE_NAMES, ["cmd_x", "cmd_y"], {"top": image_size} if with_images else None
+    )
 
 
 def disc_coverage(states: np.ndarray) -> float:
@@ -732,9 +726,8 @@ def record_planar_push_dataset(
     dropped. ``operator_options`` are keyword arguments of the operator class (e.g. ``noise``). Returns the
     dataset reopened read-only."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
-    from lerobot.utils.utils import SuppressProgressBars
 
-    from lerobot_efm.recording import finalizing
+    from lerobot_efm.dataset_writer import GENERATOR_SEAL_INTERVAL_S, EpisodeWriter
 
     from .env import FPS, PlanarPushEnv
 
@@ -754,32 +747,34 @@ def record_planar_push_dataset(
     )
     env.reset(seed=seed)
     operator = cls(env, rng, **(operator_options or {}))
-    ds = LeRobotDataset.create(
+    writer = EpisodeWriter.open(
+        root,
         repo_id,
-        fps=FPS,
-        features=planar_push_features(with_images, image_size),
-        root=root,
+        FPS,
+        planar_push_features(with_images, image_size),
         use_videos=with_images,
+        seal_interval_s=GENERATOR_SEAL_INTERVAL_S,
     )
     total, dropped, t0 = 0, 0, time.perf_counter()
-    with finalizing(ds), closing(env):
+    with writer, closing(env):
         while total < num_frames:
             states, actions, images, finished = run_episode(env, operator, max_len)
             if behaviour == "expert" and not finished:
                 dropped += 1
                 continue
-            for t in range(len(states)):
-                frame = {"observation.state": states[t], "action": actions[t], "task": task}
-                if images is not None:
-                    frame["observation.images.top"] = images[t]
-                ds.add_frame(frame)
-            with SuppressProgressBars():
-                ds.save_episode()
-            total += len(states)
+            total += writer.write_episode(
+                {
+                    "observation.state": states[t],
+                    "action": actions[t],
+                    "task": task,
+                    **({} if images is None else {"observation.images.top": images[t]}),
+                }
+                for t in range(len(states))
+            )
             if verbose:
                 print(
-                    f"{behaviour}: {total}/{num_frames} frames, {ds.num_episodes} episodes, {dropped} dropped, "
-                    f"{total / (time.perf_counter() - t0):.0f} frames/s",
+                    f"{behaviour}: {total}/{num_frames} frames, {writer.dataset.num_episodes} episodes, "
+                    f"{dropped} dropped, {total / (time.perf_counter() - t0):.0f} frames/s",
                     flush=True,
                 )
     return LeRobotDataset(repo_id, root=root)
