@@ -355,7 +355,7 @@ def test_unnormalize_inverts_the_policy_preprocessor(state_dataset):
     from lerobot.policies.factory import make_policy, make_pre_post_processors
 
     from lerobot_efm.hindsight import HindsightGoalDataset
-    from lerobot_efm.viz.rollout_log import unnormalize
+    from lerobot_efm.viz.unnormalize import unnormalize
 
     cfg = tiny_config("efm_ac")
     wrapped = HindsightGoalDataset(state_dataset, cfg)

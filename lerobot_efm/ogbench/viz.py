@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..viz.rollout_log import STATE_KEY, EnvViz, pad3
+from ..viz.env_viz import STATE_KEY, EnvViz, pad3
 
 OGBENCH_VIZ = EnvViz(
     state_points=lambda s: {"agent": pad3(np.asarray(s)[..., :2])},

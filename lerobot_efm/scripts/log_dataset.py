@@ -64,7 +64,7 @@ def log_dataset(cfg: LogDatasetConfig) -> list[dict]:
 
     from ..hindsight import HindsightGoalDataset, HindsightSpec
     from ..viz.dataset_log import log_hindsight_samples, samples_blueprint
-    from ..viz.rollout_log import get_env_viz
+    from ..viz.env_viz import get_env_viz
 
     data = cfg.dataset
     base = LeRobotDataset(

@@ -12,6 +12,12 @@ a time (``--eval.batch_size`` does not apply: each step is logged as it happens)
 The loop is lerobot-eval's (``preprocess_observation`` -> env preprocessor -> policy preprocessor ->
 ``select_action`` -> postprocessor -> env postprocessor -> ``env.step``) with one env, synchronously. What
 is logged is described in :mod:`lerobot_efm.viz.rollout_log`.
+
+Why not ``lerobot_eval.rollout`` with its callbacks: in lerobot 0.6.1 they see neither the observation nor the
+action of a step (``render_callback(env)`` gets the vector env, ``predicted_latents_callback(policy)`` the policy),
+and rewards and successes come back only when the whole batch has finished. Streaming a step as it happens would
+mean reading the observation back out of the policy's normalised input queue; this loop keeps the same order of
+processors instead, and ``lerobot-eval`` itself stays the tool for success rates.
 """
 
 import logging

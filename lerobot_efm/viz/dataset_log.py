@@ -25,16 +25,9 @@ import rerun.blueprint as rrb
 import torch
 
 from ..configuration_efm import GOAL_DISTANCE_KEY, GOAL_PREFIX, OBS_PREFIX, TRAJ_PREFIX
-from .rollout_log import (
-    CHUNK_COLOR,
-    GOAL_COLOR,
-    PLAN_COLOR,
-    STATE_KEY,
-    EnvViz,
-    get_env_viz,
-    to_hwc_uint8,
-    to_numpy,
-)
+from .env_viz import STATE_KEY, EnvViz, get_env_viz
+from .rollout_log import CHUNK_COLOR, GOAL_COLOR, PLAN_COLOR
+from .unnormalize import to_hwc_uint8, to_numpy
 
 OBS_COLOR = (210, 40, 40)
 EPISODE_COLOR = (170, 170, 170)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from ...viz.rollout_log import STATE_KEY, EnvViz, pad3
+from ...viz.env_viz import STATE_KEY, EnvViz, pad3
 from .env import STATE_NAMES
 from .maze import ARENA, wall_boxes
 
