@@ -11,9 +11,12 @@ export MUJOCO_GL := egl
 demo: .venv/.installed
 	$(PY) -m lerobot_efm.demo
 
-# Everything, the slow tests too (two-process training, the long Talos task plans): what CI runs.
+# Everything, the slow tests too (two-process training, the long Talos task plans): what CI runs. Two pytest
+# workers with one thread each (two 2-thread jobs on the 2 cores thrash), then, alone, the tests whose loops are
+# paced by the wall clock (lerobot-record / lerobot-rollout at a fixed fps: beside another test they drop frames).
 test: .venv/.installed lint
-	$(PY) -m pytest -q -m "slow or not slow" --durations=15
+	OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist loadfile -m "(slow or not slow) and not realtime" --durations=15
+	$(PY) -m pytest -q -m realtime --durations=5
 
 # LeRobot's house style (pyproject [tool.ruff]): lint and formatting, checked in CI before the tests.
 lint: .venv/.installed

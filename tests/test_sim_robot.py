@@ -145,6 +145,7 @@ def _goal_frame_clear_of_the_disc(states: np.ndarray) -> int:
     return int(frames[len(frames) // 2])
 
 
+@pytest.mark.realtime
 def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
     """The deployment workflow a user follows, checked on the simulator's state: record hand-only play with
     lerobot-record, train efm_gc (600 steps) with lerobot-train, export a frame as the goal with lerobot-efm-goal, and let
