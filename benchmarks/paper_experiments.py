@@ -255,15 +255,11 @@ def generate_command(suite: str, dataset: str, root: Path, spec: DataSpec) -> li
     return [
         *py,
         "lerobot_efm.envs.planar_push.demonstrators",
-        "--behaviour",
-        dataset,
-        "--root",
-        str(root),
-        "--frames",
-        str(frames),
-        "--repo-id",
-        dataset_repo_id(suite, dataset),
-        *[arg for option in PLANAR_OPTIONS.get(dataset, []) for arg in ("--option", option)],
+        f"--operator.type=planar_push_{dataset}",
+        *[f"--operator.{option}" for option in PLANAR_OPTIONS.get(dataset, [])],
+        f"--dataset.repo_id={dataset_repo_id(suite, dataset)}",
+        f"--dataset.root={root}",
+        f"--num_frames={frames}",
     ]
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import signal
 import time
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
@@ -31,6 +32,19 @@ from .crash_safe import repair_dataset, seal_episode_files
 
 GENERATOR_SEAL_INTERVAL_S = 30.0  # generators / converters: at most 30 s of their output lost to a SIGKILL
 _now = time.monotonic  # the sealing clock (a test steps it)
+
+
+@dataclass
+class DatasetTarget:
+    """``--dataset.repo_id`` / ``--dataset.root`` of the generators and converters (LeRobot's flag names)."""
+
+    repo_id: str | None = None  # default: the generator's (local/<name>)
+    root: str | None = None  # a new directory
+
+    def resolved(self, default_repo_id: str) -> tuple[str, Path]:
+        if not self.root:
+            raise ValueError("--dataset.root is required (a new directory, e.g. data/my_play)")
+        return self.repo_id or default_repo_id, Path(self.root)
 
 
 class RecordingInterrupted(Exception):

@@ -27,7 +27,6 @@ from lerobot_efm.envs.planar_push.demonstrators import (
     disc_coverage,
     evaluate_expert,
     main,
-    parse_options,
     record_planar_push_dataset,
     run_episode,
 )
@@ -200,32 +199,27 @@ def test_commands_trail_the_effector_like_a_cursor(env, behaviour):
     )  # the option turns it off
 
 
-def test_recorder_options_reach_the_operator(tmp_path):
-    assert parse_options(PlayPartitioned, ["noise=0.003", "cursor_reach=none", "region=2"]) == {
-        "noise": 0.003,
-        "cursor_reach": None,
-        "region": 2,
-    }
-    with pytest.raises(ValueError, match="'nois=1'.*noise"):
-        parse_options(PlayFullSpace, ["nois=1"])
-    with pytest.raises(ValueError, match="'abc' is not a number"):
-        parse_options(PlayFullSpace, ["noise=abc"])
+def test_recorder_options_reach_the_operator(tmp_path, capsys):
+    """The demonstrators' CLI takes LeRobot-style flags and the operators' draccus options (--operator.*)."""
     main(
         [
-            "--behaviour",
-            "partitioned",
-            "--root",
-            str(tmp_path / "pp"),
-            "--frames",
-            "50",
-            "--option",
-            "region=1",
+            "--operator.type=planar_push_partitioned",
+            "--operator.region=1",
+            f"--dataset.root={tmp_path / 'pp'}",
+            "--num_frames=50",
         ]
     )
     states = np.stack(
         LeRobotDataset("local/planar_push_partitioned", root=tmp_path / "pp").hf_dataset["observation.state"]
     )
     assert inside_region(states[:, 2:], 1, -REGION_OVERLAP - 0.03).all()
+    with pytest.raises(SystemExit):  # draccus: an option the operator does not have
+        main(["--operator.type=planar_push_full", "--operator.nois=1", f"--dataset.root={tmp_path / 'x'}"])
+    assert "nois" in capsys.readouterr().err
+    with pytest.raises(Exception) as refused:  # draccus wraps the config's ValueError in its ParsingError
+        main(["--operator.type=talos_kitchen_play", f"--dataset.root={tmp_path / 'y'}", "--num_frames=5"])
+    reason = str(refused.value.__cause__ or refused.value)
+    assert "records talos_kitchen, not planar push" in reason and "planar_push_partitioned" in reason
 
 
 def test_expert_reaches_its_corner(env):

@@ -14,19 +14,23 @@ around the disc when needed), then pushes with a command ``lead`` past the conta
 friction (2) equals the spring force at 0.04 of lead, so ``lead = remaining + 0.035`` stops on the target.
 Every command trails the effector like a mouse cursor, at most :data:`CURSOR_REACH` from it.
 
-CLI: ``python -m lerobot_efm.envs.planar_push.demonstrators --behaviour expert --root DIR --frames 47000``
-(``--option noise=0.003`` etc. sets operator keyword arguments)
+CLI (LeRobot-style flags; operators as in ``lerobot-efm-record``, :mod:`lerobot_efm.operators`)::
+
+    python -m lerobot_efm.envs.planar_push.demonstrators --operator.type=planar_push_expert \
+        --dataset.root=data/planar_push_expert --num_frames=47000 [--operator.noise=0.003] [--images=true]
 """
 
 from __future__ import annotations
 
-import argparse
 import time
 from contextlib import closing
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from lerobot_efm.dataset_writer import DatasetTarget
+from lerobot_efm.operators import OperatorConfig, choice_name, default_operator, register_operators
 
 from .maze import (
     ARENA,
@@ -780,69 +784,62 @@ def record_planar_push_dataset(
     return LeRobotDataset(repo_id, root=root)
 
 
-def parse_options(cls, items: list[str]) -> dict:
-    """``NAME=VALUE`` strings -> operator keyword arguments (numbers, or None for ``none``), checked against
-    ``cls.__init__``."""
-    import inspect
+@dataclass
+class DemonstrationsConfig:
+    """``python -m lerobot_efm.envs.planar_push.demonstrators --operator.type=planar_push_full
+    --dataset.root=data/planar_push_full --num_frames=36661``: the paper-sized scripted recordings."""
 
-    allowed = {
-        n: p.default
-        for c in cls.__mro__[:-1]
-        if "__init__" in vars(c)  # [:-1]: not object
-        for n, p in inspect.signature(c.__init__).parameters.items()
-        if n not in ("self", "env", "rng") and p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)
-    }
-    options = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or name not in allowed:
+    dataset: DatasetTarget = field(default_factory=DatasetTarget)
+    # --operator.type=planar_push_{expert,full,partitioned,hand}, --operator.<option>=... (lerobot_efm.operators)
+    operator: OperatorConfig | None = None
+    num_frames: int = 0  # record episodes until about this many frames
+    seed: int = 0
+    images: bool = False  # also record observation.images.top (video)
+    image_size: int = 96
+
+    def __post_init__(self):
+        if self.num_frames < 1:
+            raise ValueError(f"--num_frames={self.num_frames}: give the number of frames to record (> 0)")
+        if self.operator is not None and self.operator.env_type != "planar_push":
             raise ValueError(
-                f"--option {item!r}: expected NAME=VALUE with NAME one of {sorted(allowed)} ({cls.__name__})"
+                f"--operator.type={self.operator.type} records {self.operator.env_type}, not planar push; "
+                f"choose one of {sorted(choice_name('planar_push', b) for b in BEHAVIOURS)}"
             )
-        try:
-            number = None if value.lower() == "none" else float(value)
-            options[name] = int(number) if isinstance(allowed[name], int) and number is not None else number
-        except ValueError:
-            raise ValueError(f"--option {item!r}: value {value!r} is not a number or 'none'") from None
-    return options
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(
-        description="Record scripted planar push demonstrations (LeRobot v3 dataset)."
+def main(argv: list[str] | None = None):
+    """Record a scripted planar push dataset; ``main([...])`` runs in-process and returns it."""
+    from lerobot.configs import parser
+
+    from lerobot_efm.scripts import run_cli
+
+    def generate(cfg):
+        operator = cfg.operator or default_operator("planar_push")
+        repo_id, root = cfg.dataset.resolved(f"local/planar_push_{operator.name}")
+        t0 = time.perf_counter()
+        ds = record_planar_push_dataset(
+            operator.name,
+            root,
+            cfg.num_frames,
+            cfg.seed,
+            cfg.images,
+            repo_id,
+            cfg.image_size,
+            verbose=True,
+            operator_options=operator.options(),
+        )
+        states = np.stack([np.asarray(x) for x in ds.hf_dataset["observation.state"]])
+        print(
+            f"{root}: {ds.num_episodes} episodes, {ds.num_frames} frames in {time.perf_counter() - t0:.0f} s; "
+            f"disc coverage {disc_coverage(states):.2f} of the maze cells"
+        )
+        return ds
+
+    generate.__annotations__["cfg"] = (
+        DemonstrationsConfig  # parser.wrap reads it (annotations here are strings)
     )
-    ap.add_argument("--behaviour", required=True, choices=sorted(BEHAVIOURS))
-    ap.add_argument("--root", required=True, help="output directory (must not exist)")
-    ap.add_argument("--frames", type=int, required=True, help="record episodes until about this many frames")
-    ap.add_argument("--repo-id", default=None)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--images", action="store_true", help="also record observation.images.top (video)")
-    ap.add_argument("--image-size", type=int, default=96)
-    ap.add_argument(
-        "--option",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="operator keyword argument (repeatable), e.g. noise=0.003 or cursor_reach=none",
-    )
-    args = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    ds = record_planar_push_dataset(
-        args.behaviour,
-        args.root,
-        args.frames,
-        args.seed,
-        args.images,
-        args.repo_id,
-        args.image_size,
-        verbose=True,
-        operator_options=parse_options(BEHAVIOURS[args.behaviour][0], args.option),
-    )
-    states = np.stack([np.asarray(x) for x in ds.hf_dataset["observation.state"]])
-    print(
-        f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in "
-        f"{time.perf_counter() - t0:.0f} s; disc coverage {disc_coverage(states):.2f} of the maze cells"
-    )
+    register_operators()
+    return run_cli(parser.wrap()(generate), argv, "lerobot_efm.envs.planar_push.demonstrators")
 
 
 if __name__ == "__main__":
