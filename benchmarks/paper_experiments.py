@@ -239,17 +239,14 @@ def generate_command(suite: str, dataset: str, root: Path, spec: DataSpec) -> li
         cmd = [
             *py,
             "lerobot_efm.ogbench.generate",
-            "--dataset",
-            dataset,
-            "--root",
-            str(root),
-            "--repo-id",
-            dataset_repo_id(suite, dataset),
+            f"--ogbench_dataset={dataset}",
+            f"--dataset.repo_id={dataset_repo_id(suite, dataset)}",
+            f"--dataset.root={root}",
         ]
         if spec.ogbench_episodes:
-            cmd += ["--episodes", str(spec.ogbench_episodes)]
+            cmd.append(f"--num_episodes={spec.ogbench_episodes}")
         if spec.ogbench_episode_steps:
-            cmd += ["--episode-steps", str(spec.ogbench_episode_steps)]
+            cmd.append(f"--episode_steps={spec.ogbench_episode_steps}")
         return cmd
     frames = spec.planar_frames or PLANAR_FRAMES[dataset]
     return [

@@ -4,18 +4,23 @@ A scripted operator wanders between random waypoints with noise, pauses and deto
 around the wall through the gap above it), so the recording is goal-free and passes by many
 states. It stores no goals: hindsight relabelling creates them from future states at train time.
 
-CLI: ``python -m lerobot_efm.synthetic --root DIR [--episodes N] [--episode-length L] [--images]``
+CLI: ``python -m lerobot_efm.synthetic --dataset.root=DIR [--num_episodes=N] [--episode_length=L] [--images=true]``
 """
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-from lerobot_efm.dataset_writer import GENERATOR_SEAL_INTERVAL_S, EpisodeWriter, state_action_features
+from lerobot_efm.dataset_writer import (
+    GENERATOR_SEAL_INTERVAL_S,
+    DatasetTarget,
+    EpisodeWriter,
+    state_action_features,
+)
 from lerobot_efm.envs.point_reach import (
     WALL_TOP,
     in_wall,
@@ -154,28 +159,39 @@ def make_point_play_dataset(
     return LeRobotDataset(repo_id, root=root)
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description="Record scripted PointReach play data (LeRobot v3 dataset).")
-    ap.add_argument("--root", required=True, help="output directory (must not exist)")
-    ap.add_argument("--repo-id", default="local/efm_point_play")
-    ap.add_argument("--episodes", type=int, default=20)
-    ap.add_argument("--episode-length", type=int, default=200)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--images", action="store_true", help="also record observation.images.top (video)")
-    ap.add_argument("--image-size", type=int, default=64)
-    ap.add_argument("--no-wall", action="store_true")
-    args = ap.parse_args(argv)
+@dataclass
+class PointPlayConfig:
+    """``python -m lerobot_efm.synthetic --dataset.root=DIR [--num_episodes=N] [--images=true]``."""
+
+    dataset: DatasetTarget = field(default_factory=DatasetTarget)
+    num_episodes: int = 20
+    episode_length: int = 200
+    seed: int = 0
+    images: bool = False  # also record observation.images.top (video)
+    image_size: int = 64
+    wall: bool = True
+
+    def __post_init__(self):
+        if self.num_episodes < 1 or self.episode_length < 1:
+            raise ValueError(
+                f"--num_episodes={self.num_episodes} and --episode_length={self.episode_length} must be positive"
+            )
+
+
+def generate(cfg: PointPlayConfig) -> LeRobotDataset:
+    repo_id, root = cfg.dataset.resolved("local/efm_point_play")
     ds = make_point_play_dataset(
-        args.root,
-        args.repo_id,
-        args.episodes,
-        args.episode_length,
-        args.seed,
-        args.images,
-        args.image_size,
-        wall=not args.no_wall,
+        root, repo_id, cfg.num_episodes, cfg.episode_length, cfg.seed, cfg.images, cfg.image_size, cfg.wall
     )
-    print(f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames")
+    print(f"{root}: {ds.num_episodes} episodes, {ds.num_frames} frames")
+    return ds
+
+
+def main(argv: list[str] | None = None):
+    """Generate PointReach play; ``main([...])`` runs in-process and returns the dataset."""
+    from lerobot_efm.scripts import run_config_cli
+
+    return run_config_cli(PointPlayConfig, generate, argv, "lerobot_efm.synthetic")
 
 
 if __name__ == "__main__":

@@ -120,7 +120,9 @@ def test_convert_round_trip_and_hindsight(raw, tmp_path):
 
 def test_cli_generate_and_convert(tmp_path, capsys):
     root = tmp_path / "nav"
-    generate_main(["--dataset", NAV, "--episodes", "2", "--episode-steps", "50", "--root", str(root)])
+    generate_main(
+        [f"--ogbench_dataset={NAV}", "--num_episodes=2", "--episode_steps=50", f"--dataset.root={root}"]
+    )
     assert "2 episodes, 100 frames" in capsys.readouterr().out
     assert LeRobotDataset(f"local/{NAV}", root=root).num_frames == 100
     ds = convert_npz(tmp_path / "nav-npz" / f"{NAV}.npz", tmp_path / "again", fps=20)

@@ -61,7 +61,7 @@ def test_video_dataset(tmp_path):
 
 def test_cli(tmp_path, capsys):
     root = tmp_path / "cli"
-    synthetic.main(["--root", str(root), "--episodes", "2", "--episode-length", "20"])
+    synthetic.main([f"--dataset.root={root}", "--num_episodes=2", "--episode_length=20"])
     out = capsys.readouterr().out
     assert str(root) in out and "40 frames" in out
 

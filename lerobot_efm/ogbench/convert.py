@@ -7,20 +7,25 @@ goals come from hindsight relabelling, and for pointmaze the observation *is* qp
 
 FPS = 10: the point env's own ``render_fps`` (5 MuJoCo substeps of 0.02 s per action). It only sets timestamps.
 
-CLI: ``python -m lerobot_efm.ogbench.convert --npz X.npz --root DIR [--repo-id local/X] [--fps 10]``
+CLI: ``python -m lerobot_efm.ogbench.convert --npz=X.npz --dataset.root=DIR [--dataset.repo_id=local/X] [--fps=10]``
 """
 
 from __future__ import annotations
 
-import argparse
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from tqdm import tqdm
 
-from lerobot_efm.dataset_writer import GENERATOR_SEAL_INTERVAL_S, EpisodeWriter, state_action_features
+from lerobot_efm.dataset_writer import (
+    GENERATOR_SEAL_INTERVAL_S,
+    DatasetTarget,
+    EpisodeWriter,
+    state_action_features,
+)
 
 FPS = 10
 REQUIRED_KEYS = ("observations", "actions", "terminals")
@@ -112,19 +117,33 @@ def convert_npz(
     )
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description="Convert an OGBench raw .npz dataset to a LeRobot v3 dataset.")
-    ap.add_argument("--npz", required=True, help="OGBench raw dataset (observations, actions, terminals)")
-    ap.add_argument("--root", required=True, help="output directory (must not exist)")
-    ap.add_argument("--repo-id", default=None, help="default: local/<npz stem>")
-    ap.add_argument("--fps", type=int, default=FPS)
-    ap.add_argument("--task", default=None, help="task label of every frame (default: npz stem)")
-    args = ap.parse_args(argv)
+@dataclass
+class ConvertConfig:
+    """``python -m lerobot_efm.ogbench.convert --npz=X.npz --dataset.root=DIR [--dataset.repo_id=local/X]``."""
+
+    npz: str = ""  # OGBench raw dataset (observations, actions, terminals)
+    dataset: DatasetTarget = field(default_factory=DatasetTarget)  # default repo id: local/<npz stem>
+    fps: int = FPS
+    task: str | None = None  # task label of every frame (default: the npz stem)
+
+    def __post_init__(self):
+        if not self.npz:
+            raise ValueError("--npz is required (an OGBench raw .npz file)")
+
+
+def convert(cfg: ConvertConfig):
+    repo_id, root = cfg.dataset.resolved(f"local/{Path(cfg.npz).stem}")
     t0 = time.perf_counter()
-    ds = convert_npz(args.npz, args.root, args.repo_id, args.fps, args.task)
-    print(
-        f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames in {time.perf_counter() - t0:.1f} s"
-    )
+    ds = convert_npz(cfg.npz, root, repo_id, cfg.fps, cfg.task)
+    print(f"{root}: {ds.num_episodes} episodes, {ds.num_frames} frames in {time.perf_counter() - t0:.1f} s")
+    return ds
+
+
+def main(argv: list[str] | None = None):
+    """Convert; ``main([...])`` runs in-process and returns the LeRobot dataset."""
+    from lerobot_efm.scripts import run_config_cli
+
+    return run_config_cli(ConvertConfig, convert, argv, "lerobot_efm.ogbench.convert")
 
 
 if __name__ == "__main__":

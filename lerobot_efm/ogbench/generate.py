@@ -13,21 +13,21 @@ All randomness comes from the global ``np.random`` (OGBench's env draws start/go
 seed, plus the env's own ``np_random`` and action space, seeded too: a (name, size, seed) triple gives
 bit-identical arrays. Val files hold the next ``num_episodes // 10`` episodes of the same stream.
 
-CLI (generate + convert to LeRobot): ``python -m lerobot_efm.ogbench.generate --dataset
-pointmaze-large-navigate-v0 --episodes N --root DIR [--npz-dir D]``.
+CLI (generate + convert to LeRobot): ``python -m lerobot_efm.ogbench.generate
+--ogbench_dataset=pointmaze-large-navigate-v0 --dataset.root=DIR [--num_episodes=N] [--npz_dir=D]``.
 """
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from lerobot_efm.dataset_writer import DatasetTarget
 from lerobot_efm.extras import require
 
 NOISE = 0.5  # OGBench's --noise for pointmaze
@@ -224,43 +224,47 @@ def save_pointmaze_npz(
     return paths
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(
-        description="Generate an OGBench pointmaze dataset locally and convert it to LeRobot v3."
-    )
-    ap.add_argument("--dataset", required=True, choices=sorted(RECIPES))
-    ap.add_argument("--episodes", type=int, default=None, help="training episodes (default: official size)")
-    ap.add_argument("--episode-steps", type=int, default=None, help="rows per episode (default: official)")
-    ap.add_argument("--noise", type=float, default=NOISE)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--root", required=True, help="LeRobot dataset directory (must not exist)")
-    ap.add_argument("--repo-id", default=None, help="default: local/<dataset>")
-    ap.add_argument("--npz-dir", default=None, help="where the raw npz files go (default: <root>-npz)")
-    ap.add_argument(
-        "--fps", type=int, default=None, help="dataset fps (default: lerobot_efm.ogbench.convert.FPS)"
-    )
-    args = ap.parse_args(argv)
+@dataclass
+class GenerateConfig:
+    """``python -m lerobot_efm.ogbench.generate --ogbench_dataset=pointmaze-large-navigate-v0
+    --dataset.root=DIR [--num_episodes=N] [--episode_steps=T]``: generate, then convert to LeRobot v3."""
 
+    ogbench_dataset: str = ""  # one of RECIPES
+    dataset: DatasetTarget = field(default_factory=DatasetTarget)  # default repo id: local/<ogbench_dataset>
+    num_episodes: int | None = None  # training episodes (default: the official size)
+    episode_steps: int | None = None  # rows per episode (default: official)
+    noise: float = NOISE
+    seed: int = 0
+    npz_dir: str | None = None  # where the raw npz files go (default: <root>-npz)
+    fps: int | None = None  # dataset fps (default: lerobot_efm.ogbench.convert.FPS)
+
+    def __post_init__(self):
+        if self.ogbench_dataset not in RECIPES:
+            raise ValueError(f"--ogbench_dataset={self.ogbench_dataset!r}: expected one of {sorted(RECIPES)}")
+
+
+def generate(cfg: GenerateConfig):
     from .convert import FPS, convert_npz
 
-    npz_dir = Path(args.npz_dir) if args.npz_dir else Path(f"{Path(args.root)}-npz")
+    repo_id, root = cfg.dataset.resolved(f"local/{cfg.ogbench_dataset}")
+    npz_dir = Path(cfg.npz_dir) if cfg.npz_dir else Path(f"{root}-npz")
     t0 = time.perf_counter()
     train_path, val_path = save_pointmaze_npz(
-        args.dataset, npz_dir, args.episodes, args.episode_steps, args.noise, args.seed
+        cfg.ogbench_dataset, npz_dir, cfg.num_episodes, cfg.episode_steps, cfg.noise, cfg.seed
     )
     t1 = time.perf_counter()
-    ds = convert_npz(
-        train_path,
-        args.root,
-        repo_id=args.repo_id or f"local/{args.dataset}",
-        fps=args.fps or FPS,
-        task=args.dataset,
-    )
+    ds = convert_npz(train_path, root, repo_id=repo_id, fps=cfg.fps or FPS, task=cfg.ogbench_dataset)
     t2 = time.perf_counter()
     print(f"{train_path}, {val_path}: generated in {t1 - t0:.1f} s")
-    print(
-        f"{Path(args.root).resolve()}: {ds.num_episodes} episodes, {ds.num_frames} frames, converted in {t2 - t1:.1f} s"
-    )
+    print(f"{root}: {ds.num_episodes} episodes, {ds.num_frames} frames, converted in {t2 - t1:.1f} s")
+    return ds
+
+
+def main(argv: list[str] | None = None):
+    """Generate and convert; ``main([...])`` runs in-process and returns the LeRobot dataset."""
+    from lerobot_efm.scripts import run_config_cli
+
+    return run_config_cli(GenerateConfig, generate, argv, "lerobot_efm.ogbench.generate")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Command-line scripts of lerobot_efm (rerun rollouts and dataset logging)."""
+"""Command-line scripts of lerobot_efm (recording, goals, rerun rollouts and dataset logging)."""
 
 from __future__ import annotations
 
@@ -24,3 +24,15 @@ def run_cli(entry: Callable, argv: list[str] | None, prog: str):
         return entry()
     finally:
         sys.argv = saved
+
+
+def run_config_cli(config_cls: type, body: Callable, argv: list[str] | None, prog: str):
+    """:func:`run_cli` of ``parser.wrap()`` over ``body(cfg)`` with ``cfg: config_cls``: for modules whose
+    annotations are postponed strings (``from __future__ import annotations``), which ``parser.wrap`` cannot read."""
+    from lerobot.configs import parser
+
+    def entry(cfg):
+        return body(cfg)
+
+    entry.__annotations__ = {"cfg": config_cls}
+    return run_cli(parser.wrap()(entry), argv, prog)

@@ -807,39 +807,35 @@ class DemonstrationsConfig:
             )
 
 
+def generate(cfg: DemonstrationsConfig):
+    operator = cfg.operator or default_operator("planar_push")
+    repo_id, root = cfg.dataset.resolved(f"local/planar_push_{operator.name}")
+    t0 = time.perf_counter()
+    ds = record_planar_push_dataset(
+        operator.name,
+        root,
+        cfg.num_frames,
+        cfg.seed,
+        cfg.images,
+        repo_id,
+        cfg.image_size,
+        verbose=True,
+        operator_options=operator.options(),
+    )
+    states = np.stack([np.asarray(x) for x in ds.hf_dataset["observation.state"]])
+    print(
+        f"{root}: {ds.num_episodes} episodes, {ds.num_frames} frames in {time.perf_counter() - t0:.0f} s; "
+        f"disc coverage {disc_coverage(states):.2f} of the maze cells"
+    )
+    return ds
+
+
 def main(argv: list[str] | None = None):
     """Record a scripted planar push dataset; ``main([...])`` runs in-process and returns it."""
-    from lerobot.configs import parser
+    from lerobot_efm.scripts import run_config_cli
 
-    from lerobot_efm.scripts import run_cli
-
-    def generate(cfg):
-        operator = cfg.operator or default_operator("planar_push")
-        repo_id, root = cfg.dataset.resolved(f"local/planar_push_{operator.name}")
-        t0 = time.perf_counter()
-        ds = record_planar_push_dataset(
-            operator.name,
-            root,
-            cfg.num_frames,
-            cfg.seed,
-            cfg.images,
-            repo_id,
-            cfg.image_size,
-            verbose=True,
-            operator_options=operator.options(),
-        )
-        states = np.stack([np.asarray(x) for x in ds.hf_dataset["observation.state"]])
-        print(
-            f"{root}: {ds.num_episodes} episodes, {ds.num_frames} frames in {time.perf_counter() - t0:.0f} s; "
-            f"disc coverage {disc_coverage(states):.2f} of the maze cells"
-        )
-        return ds
-
-    generate.__annotations__["cfg"] = (
-        DemonstrationsConfig  # parser.wrap reads it (annotations here are strings)
-    )
     register_operators()
-    return run_cli(parser.wrap()(generate), argv, "lerobot_efm.envs.planar_push.demonstrators")
+    return run_config_cli(DemonstrationsConfig, generate, argv, "lerobot_efm.envs.planar_push.demonstrators")
 
 
 if __name__ == "__main__":
