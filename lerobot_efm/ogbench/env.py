@@ -89,7 +89,7 @@ class OGBenchEnv(gym.Env):
             raise ValueError(f"Unknown render_backend {render_backend!r}; valid: {list(RENDER_BACKENDS)}")
         self.render_backend, self.render_mode = render_backend, render_mode
         obs_dim, act_dim, _ = DATASETS[dataset]
-        ogbench = require("ogbench", "ogbench", "the OGBench environments")  # lazy: MuJoCo + dm_control
+        ogbench = require("ogbench", "ogbench", "the OGBench environment")  # lazy: MuJoCo + dm_control
 
         self.maze = ogbench.make_env_and_datasets(dataset, env_only=True, terminate_at_goal=True).unwrapped
         box = spaces.Box(-np.inf, np.inf, shape=(obs_dim,), dtype=np.float32)
