@@ -10,9 +10,20 @@ import torch
 from lerobot.configs import FeatureType, PipelineFeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline
-from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
+
+from ..configuration_efm import GOAL_PREFIX, mirror_key
 
 GOAL_STATE_KEY = "goal.state"  # env observation key; reaches the policy as observation.goal.state
+
+# The goal observations a goal env returns, named as the hindsight wrapper names its goals (one source of truth).
+OBS_GOAL_STATE = mirror_key(OBS_STATE, GOAL_PREFIX)
+OBS_GOAL_ENV_STATE = mirror_key(OBS_ENV_STATE, GOAL_PREFIX)
+OBS_GOAL_IMAGES = mirror_key(OBS_IMAGES, GOAL_PREFIX)
+
+
+def goal_image_key(camera: str) -> str:
+    return f"{OBS_GOAL_IMAGES}.{camera}"
 
 
 @dataclass
@@ -23,7 +34,7 @@ class GoalImagesChannelFirstStep(ObservationProcessorStep):
     pass through as float (B, H, W, 3) in [0, 255].
     """
 
-    prefix: str = "observation.goal.images."
+    prefix: str = OBS_GOAL_IMAGES + "."
 
     def observation(self, observation):
         for key, img in list(observation.items()):
@@ -72,9 +83,9 @@ def state_goal_features_map(camera: str) -> dict[str, str]:
     return {
         ACTION: ACTION,
         "agent_pos": OBS_STATE,
-        GOAL_STATE_KEY: f"observation.{GOAL_STATE_KEY}",
+        GOAL_STATE_KEY: OBS_GOAL_STATE,
         f"{OBS_IMAGES}.{camera}": f"{OBS_IMAGES}.{camera}",  # identity: eval recording needs this form
-        f"goal.images.{camera}": f"observation.goal.images.{camera}",
+        f"goal.images.{camera}": goal_image_key(camera),
     }
 
 

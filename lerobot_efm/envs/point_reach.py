@@ -27,6 +27,7 @@ from .goal_env import (  # noqa: F401  (GoalImagesChannelFirstStep re-exported)
     GoalEnvConfig,
     GoalImagesChannelFirstStep,
     add_camera_features,
+    goal_image_key,
     state_goal_features,
     state_goal_features_map,
 )
@@ -40,8 +41,7 @@ AGENT_RADIUS = 0.07  # drawing only: the point is a disc in images
 OBS_TYPES = ("state", "pixels_state")
 GOAL_STATE_KEY = "goal.state"  # env key; becomes observation.goal.state
 GOAL_IMAGE_KEY = "goal.images.top"  # env key; becomes observation.goal.images.top
-OBS_GOAL_STATE = "observation.goal.state"
-OBS_GOAL_IMAGE = "observation.goal.images.top"
+OBS_GOAL_IMAGE = goal_image_key("top")
 
 # Named tasks: (nominal start, nominal goal, description). Each reset jitters both by up to
 # TASK_JITTER so that repeated evaluation episodes are not identical copies.

@@ -33,12 +33,11 @@ from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_STATE
 
-from lerobot_efm.envs.goal_env import GoalEnvConfig
+from lerobot_efm.envs.goal_env import OBS_GOAL_STATE, GoalEnvConfig
 from lerobot_efm.extras import require
 
 GYM_ID = "lerobot_efm/OGBench-v0"
 GOAL_STATE_KEY = "goal.state"  # env key; becomes observation.goal.state
-OBS_GOAL_STATE = "observation.goal.state"
 FPS = 10  # point env's render_fps (5 substeps of 0.02 s per action)
 TASK_NAMES = ("task1", "task2", "task3", "task4", "task5")
 TASKS = (*TASK_NAMES, "all")

@@ -49,7 +49,13 @@ from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
 
 from ...extras import require
-from ..goal_env import GoalEnvConfig, add_camera_features, state_goal_features, state_goal_features_map
+from ..goal_env import (
+    GoalEnvConfig,
+    add_camera_features,
+    goal_image_key,
+    state_goal_features,
+    state_goal_features_map,
+)
 from .maze import ARENA, CORNER, EFFECTOR_RADIUS, OBJECT_RADIUS, wall_boxes, wall_distance
 
 GYM_ID = "lerobot_efm/PlanarPush-v0"
@@ -68,8 +74,7 @@ REWARDS = ("success", "progress")
 CAMERA = "top"
 GOAL_STATE_KEY = "goal.state"
 GOAL_IMAGE_KEY = f"goal.images.{CAMERA}"
-OBS_GOAL_STATE = "observation.goal.state"
-OBS_GOAL_IMAGE = f"observation.goal.images.{CAMERA}"
+OBS_GOAL_IMAGE = goal_image_key(CAMERA)
 GOAL_MARKER_GROUP = 3  # geom group of the goal markers, hidden in observation images
 ALL = "all"
 

@@ -55,7 +55,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 
 from ...extras import require
-from ..goal_env import GoalEnvConfig
+from ..goal_env import OBS_GOAL_ENV_STATE, OBS_GOAL_STATE, GoalEnvConfig, goal_image_key
 from .tasks import (
     ALL,
     DOOR_TOL,
@@ -81,9 +81,7 @@ STATE_DIM, ENV_STATE_DIM, ACTION_DIM = len(STATE_NAMES), len(ENV_STATE_NAMES), 1
 GOAL_STATE_KEY = "goal.state"
 GOAL_ENV_STATE_KEY = "goal.environment_state"
 GOAL_IMAGE_KEY = f"goal.images.{CAMERA}"
-OBS_GOAL_STATE = "observation.goal.state"
-OBS_GOAL_ENV_STATE = "observation.goal.environment_state"
-OBS_GOAL_IMAGE = f"observation.goal.images.{CAMERA}"
+OBS_GOAL_IMAGE = goal_image_key(CAMERA)
 SETTLE_STEPS = 5  # control steps (0.2 s) of physics after setting a state directly
 TRAY_FLOOR = 0.009  # pot base height above the tray body origin (tray floor top 0.008 + 1 mm)
 TABLE_CLEARANCE = 0.001
