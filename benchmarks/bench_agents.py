@@ -58,9 +58,9 @@ from lerobot_efm.configuration_efm import (  # noqa: E402
     TRAJ_PREFIX,
     mirror_key,
 )
+from lerobot_efm.modeling_efm import AGENT_NAMES  # noqa: E402
 
 AGENT_TYPES = ["efm_gc", "efm_ac", "efm_pc", "efm_ps", "efm_as"]
-PAPER_NAMES = {"efm_gc": "FM-GC", "efm_ac": "FM-AC", "efm_pc": "FM-PC", "efm_ps": "FM-PS", "efm_as": "FM-AS"}
 REFERENCE_DOC = "../shared/docs/reference-implementation.md"
 CONTENDED = " †"
 CONTENTION_THRESHOLD = 0.8
@@ -145,7 +145,7 @@ REFERENCE = {
 
 
 def variant_name(policy_type: str, use_rl: bool) -> str:
-    name = PAPER_NAMES[policy_type]
+    name = AGENT_NAMES[policy_type.removeprefix("efm_")]
     if policy_type == "efm_gc":
         return name
     return f"{name} {'use-RL' if use_rl else 'no-RL'}"

@@ -45,25 +45,28 @@ from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
+from lerobot_efm.modeling_efm import AGENT_NAMES
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 RESULT_FILE = "result.json"
 CHECKPOINT = Path("checkpoints") / "last" / "pretrained_model"
+
 FULL_STEPS, FULL_BATCH = 200_000, 128
 CPU_STEPS, CPU_BATCH = 2_000, 64
 EVAL_SEED = 1000  # lerobot-eval's default seed, passed explicitly: episode i runs seed EVAL_SEED + i
 
-# variant name -> (policy type, use_rl, paper label)
+# variant name -> (policy type, use_rl, paper label): the paper's nine agent variants (Table I, Fig. 5 and 7)
 VARIANTS: dict[str, tuple[str, bool, str]] = {
-    "gc": ("efm_gc", False, "FM-GC"),
-    "ac": ("efm_ac", False, "FM-AC no-RL"),
-    "pc": ("efm_pc", False, "FM-PC no-RL"),
-    "ps": ("efm_ps", False, "FM-PS no-RL"),
-    "as": ("efm_as", False, "FM-AS no-RL"),
-    "ac_rl": ("efm_ac", True, "FM-AC use-RL"),
-    "pc_rl": ("efm_pc", True, "FM-PC use-RL"),
-    "ps_rl": ("efm_ps", True, "FM-PS use-RL"),
-    "as_rl": ("efm_as", True, "FM-AS use-RL"),
+    **{
+        short: (f"efm_{short}", False, name if short == "gc" else f"{name} no-RL")
+        for short, name in AGENT_NAMES.items()
+    },
+    **{
+        f"{short}_rl": (f"efm_{short}", True, f"{name} use-RL")
+        for short, name in AGENT_NAMES.items()
+        if short != "gc"
+    },
 }
 
 

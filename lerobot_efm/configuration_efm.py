@@ -16,14 +16,14 @@ from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.optim import AdamWConfig
 from lerobot.optim.optimizers import OptimizerConfig
 from lerobot.optim.schedulers import CosineDecayWithWarmupSchedulerConfig
+from lerobot.utils.constants import OBS_PREFIX
 
 # Batch-key prefixes the hindsight wrapper adds. Each mirrors every ``observation.<key>``:
-GOAL_PREFIX = "observation.goal."  # the hindsight goal g = o_{k+d}
-RL_GOAL_PREFIX = "observation.rl_goal."  # g' drawn from the whole dataset (RL bootstrap, eq. 5)
-TRAJ_PREFIX = "observation.traj."  # the observation trajectory tau^o (L_o frames)
+GOAL_PREFIX = OBS_PREFIX + "goal."  # the hindsight goal g = o_{k+d}
+RL_GOAL_PREFIX = OBS_PREFIX + "rl_goal."  # g' drawn from the whole dataset (RL bootstrap, eq. 5)
+TRAJ_PREFIX = OBS_PREFIX + "traj."  # the observation trajectory tau^o (L_o frames)
 MIRROR_PREFIXES = (GOAL_PREFIX, RL_GOAL_PREFIX, TRAJ_PREFIX)
-GOAL_DISTANCE_KEY = "observation.goal_distance"  # d, in steps (not normalised by the processor)
-OBS_PREFIX = "observation."
+GOAL_DISTANCE_KEY = OBS_PREFIX + "goal_distance"  # d, in steps (not normalised by the processor)
 
 
 def is_mirror_key(key: str) -> bool:
