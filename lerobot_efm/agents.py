@@ -286,7 +286,10 @@ class EFMAgent(nn.Module, abc.ABC):
         t_goal, t_rl_goal = target.encode(batch, (GOAL_PREFIX, RL_GOAL_PREFIX))
         eps = torch.rand(cfg.num_critics, l_obs.shape[0], device=l_obs.device) * cfg.rl_goal_ratio
         bridge = target.critic.query(torch.cat([t_goal, t_rl_goal], -1), eps, cfg.num_inference_steps).amax(0)
-        return Rows(l_obs, l_rl_goal, distance + bridge, actions, obs_traj)
+        stitched = distance + bridge
+        if cfg.rl_target_cap is not None:  # keeps the bootstrap from feeding on a runaway critic
+            stitched = stitched.clamp(max=cfg.rl_target_cap)
+        return Rows(l_obs, l_rl_goal, stitched, actions, obs_traj)
 
     def critic_loss(self, rows: Rows) -> Tensor:
         return self.critic.loss(torch.cat([rows.obs, rows.goal], -1), rows.distance)

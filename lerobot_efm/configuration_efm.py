@@ -76,6 +76,9 @@ class EFMConfig(PreTrainedConfig):
             eq. 5 noise targets, which cost short CPU budgets more than the stitching gains).
         rl_ramp_steps: after the warm-up the number of bootstrap rows grows linearly from 0 to the batch size
             over these updates (0 = all at once).
+        rl_target_cap: cap of eq. 5's target d + bridge, in units of ``max_goal_distance`` (None = uncapped, the
+            paper's setting). The target feeds on the EMA critic's own output: uncapped, a short CPU run's
+            cross-region estimates ran away to 10x the expert's steps (the reference's stay under ~2).
 
     Deployment (a robot's observations carry no goal; :mod:`lerobot_efm.goal_source`):
         goal_path: a goal file (safetensors of one observation's ``observation.*`` keys, ``lerobot-efm-goal``).
@@ -122,6 +125,7 @@ class EFMConfig(PreTrainedConfig):
     rl_goal_ratio: float = 0.3
     rl_warmup_steps: int = 0
     rl_ramp_steps: int = 0
+    rl_target_cap: float | None = None
 
     goal_path: str | None = None
     goal_dataset_root: str | None = None
@@ -198,6 +202,7 @@ class EFMConfig(PreTrainedConfig):
             "rl_goal_ratio": 0.0 <= self.rl_goal_ratio <= 1.0,
             "rl_warmup_steps": self.rl_warmup_steps >= 0,
             "rl_ramp_steps": self.rl_ramp_steps >= 0,
+            "rl_target_cap": self.rl_target_cap is None or self.rl_target_cap > 0,
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
             "goal_advance_distance": self.goal_advance_distance >= 0.0,
             "goal_advance_key": self.goal_advance_key is None or bool(self.goal_advance_key.strip()),

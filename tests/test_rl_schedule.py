@@ -59,7 +59,23 @@ def test_policy_forward_follows_the_update_counter(state_dataset):
     ]
 
 
+def test_bootstrap_targets_are_capped(state_dataset, monkeypatch):
+    """rl_target_cap bounds eq. 5's target d + bridge (units of max_goal_distance); None leaves it as it is."""
+    policy, batch = _policy_and_batch(state_dataset, rl_target_cap=1.5)
+    critic = policy.ema_model.critic
+    monkeypatch.setattr(
+        critic, "query", lambda cond, eps, steps: torch.full((eps.shape[0], cond.shape[0]), 5.0)
+    )
+    capped = policy.model.training_rows(batch, policy.ema_model).goal_conditioned.distance[-8:]
+    assert torch.all(capped == 1.5)
+    policy.config.rl_target_cap = None
+    uncapped = policy.model.training_rows(batch, policy.ema_model).goal_conditioned.distance[-8:]
+    assert torch.all(uncapped >= 5.0)
+
+
 def test_invalid_schedule_is_rejected():
+    with pytest.raises(ValueError, match="rl_target_cap=0"):
+        tiny_config("efm_ac", use_rl=True, rl_target_cap=0.0)
     with pytest.raises(ValueError, match="rl_warmup_steps=-1"):
         tiny_config("efm_ac", use_rl=True, rl_warmup_steps=-1)
     with pytest.raises(ValueError, match="rl_ramp_steps=-3"):
