@@ -26,12 +26,15 @@ POINT_ARGS = [
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
 
 
+def _record_ok(args: list[str]) -> None:
+    """Run lerobot-efm-record in a subprocess; it must succeed."""
+    subprocess.run(args, check=True, env=ENV, capture_output=True, timeout=300)
+
+
 def test_cli_records_video_dataset_and_resumes(tmp_path):
     root = tmp_path / "ds"
     args = [*RECORD, *POINT_ARGS, f"--dataset.root={root}", "--dataset.episode_time_s=1.5"]
-    subprocess.run(
-        [*args, "--dataset.num_episodes=2", "--seed=3"], check=True, env=ENV, capture_output=True, timeout=300
-    )
+    _record_ok([*args, "--dataset.num_episodes=2", "--seed=3"])
     ds = LeRobotDataset("local/rec_test", root=root)
     assert ds.num_episodes == 2 and ds.num_frames == 60
     assert ds.meta.features["observation.images.top"]["dtype"] == "video"
@@ -49,13 +52,7 @@ def test_cli_records_video_dataset_and_resumes(tmp_path):
         [*args, "--dataset.num_episodes=1", "--seed=4"], env=ENV, capture_output=True, text=True
     )
     assert again.returncode != 0 and "--resume=true" in again.stderr  # never overwrites a dataset
-    subprocess.run(
-        [*args, "--dataset.num_episodes=1", "--resume=true"],
-        check=True,
-        env=ENV,
-        capture_output=True,
-        timeout=300,
-    )
+    _record_ok([*args, "--dataset.num_episodes=1", "--resume=true"])
     ds = LeRobotDataset("local/rec_test", root=root)
     assert ds.num_episodes == 3 and ds.num_frames == 90
     assert ds[89]["observation.images.top"].shape == (3, 32, 32)
@@ -226,7 +223,7 @@ def test_a_recorder_killed_with_sigkill_keeps_every_saved_episode(tmp_path):
     assert ds.num_episodes >= saved and ds.num_frames == 40 * ds.num_episodes
     assert ds[ds.num_frames - 1]["observation.images.top"].shape == (3, 32, 32)  # the last video decodes
     kept = ds.num_episodes
-    subprocess.run(
+    _record_ok(
         [
             *RECORD,
             *POINT_ARGS,
@@ -234,11 +231,7 @@ def test_a_recorder_killed_with_sigkill_keeps_every_saved_episode(tmp_path):
             "--dataset.episode_time_s=2",
             "--dataset.num_episodes=1",
             "--resume=true",
-        ],
-        check=True,
-        env=ENV,
-        capture_output=True,
-        timeout=300,
+        ]
     )
     assert LeRobotDataset("local/rec_test", root=root).num_episodes == kept + 1
 
@@ -249,18 +242,14 @@ def test_repair_removes_the_debris_of_a_save_cut_short(tmp_path):
     from lerobot_efm.crash_safe import repair_dataset
 
     root = tmp_path / "ds"
-    subprocess.run(
+    _record_ok(
         [
             *RECORD,
             *POINT_ARGS,
             f"--dataset.root={root}",
             "--dataset.episode_time_s=1",
             "--dataset.num_episodes=3",
-        ],
-        check=True,
-        env=ENV,
-        capture_output=True,
-        timeout=300,
+        ]
     )
     data = sorted(root.glob("data/**/*.parquet"))
     meta = sorted(root.glob("meta/episodes/**/*.parquet"))
@@ -301,13 +290,7 @@ def test_operators_are_draccus_choices_with_their_own_options(tmp_path):
         "--dataset.episode_time_s=2",
         "--dataset.push_to_hub=false",
     ]
-    subprocess.run(
-        [*args, "--operator.type=planar_push_hand", "--operator.pause_share=0.0"],
-        check=True,
-        env=ENV,
-        capture_output=True,
-        timeout=300,
-    )
+    _record_ok([*args, "--operator.type=planar_push_hand", "--operator.pause_share=0.0"])
     states = np.stack(LeRobotDataset("local/op_test", root=tmp_path / "ds").hf_dataset["observation.state"])
     assert (
         np.ptp(states[:, 2:], axis=0).max() < 1e-6 and np.ptp(states[:, :2], axis=0).max() > 0.05
