@@ -136,7 +136,7 @@ def open_dataset(
         return ds
     if root.exists():  # LeRobot would fail later with a bare mkdir error
         raise FileExistsError(
-            f"Dataset root {root} already exists; pass --resume=true to append or pick a new root"
+            f"Dataset root {root} already exists; pick a new root (lerobot-efm-record appends with --resume=true)"
         )
     return LeRobotDataset.create(
         repo_id,
