@@ -60,6 +60,10 @@ class EFMConfig(PreTrainedConfig):
             predicts d / L_g.
         action_mode: "absolute" (position commands: the chunk holds the goal command once the goal is reached)
             or "velocity" (the chunk becomes zero past the goal), as in the reference.
+        cache_frames: decode every camera frame of the training dataset once, resized to the policy's image
+            shape, and keep them in RAM as uint8 (N x C x H x W bytes a camera) instead of decoding the frames
+            of every sample; pays when decoding bounds the step rate (small images on a CPU). Camera frames of
+            another size than ``input_features`` are resized either way (OpenCV, as at deployment).
 
     Inference:
         num_inference_steps: Euler steps of every flow integration (reference: 20).
@@ -115,6 +119,7 @@ class EFMConfig(PreTrainedConfig):
     action_traj_stride: int = 1
     max_goal_distance: int = 600
     action_mode: str = "absolute"
+    cache_frames: bool = False
 
     num_inference_steps: int = 20
     critic_inference_eps: float = 0.0

@@ -15,11 +15,11 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import numpy as np
 import torch
 from lerobot.utils.keyboard_input import create_key_listener
 
 from .configuration_efm import GOAL_PREFIX, OBS_PREFIX, is_mirror_key
+from .frames import fit_frames, resize_frame
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +90,7 @@ def fit_live_images(observation: dict) -> dict:
             )
             _deploy["warned"].add(key)
         frames = value.reshape(-1, *value.shape[-3:]).cpu()
-        resized = torch.stack([_resize(f, shape) for f in frames])
+        resized = fit_frames(frames, shape)
         observation[key] = resized.reshape(*value.shape[:-3], *shape).to(value.device)
     return observation
 
@@ -181,17 +181,6 @@ def read_dataset_frame(
     }
 
 
-def _resize(img: torch.Tensor, shape: tuple[int, ...]) -> torch.Tensor:
-    """(C, H, W) float image -> ``shape`` with OpenCV (area interpolation when shrinking)."""
-    import cv2
-
-    c, h, w = shape
-    hwc = img.permute(1, 2, 0).numpy().astype(np.float32)
-    shrink = h * w < hwc.shape[0] * hwc.shape[1]
-    out = cv2.resize(hwc, (w, h), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
-    return torch.from_numpy(out.reshape(h, w, c)).permute(2, 0, 1).contiguous()
-
-
 def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> dict[str, torch.Tensor]:
     """Observation tensors -> the policy's goal keys, in the layout of LeRobot's inference input (float32,
     images CHW in [0, 1]), checked against the features of the checkpoint (goal keys are in ``input_features``).
@@ -224,7 +213,7 @@ def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> 
                     tuple(value.shape),
                     shape,
                 )
-                value = _resize(value, shape)
+                value = resize_frame(value, shape)
         else:
             value = value.float().reshape(-1) if value.dim() <= 1 else value.float()
             if tuple(value.shape) != shape:

@@ -2,7 +2,8 @@
 
 For a start frame k the wrapper yields the tuple (o_k, tau^o, tau^a, d, g) with the goal g = o_{k+d}
 taken from the same episode, d ~ U{0 .. min(L_g, frames left)}. Vector columns are read once into
-memory; camera frames are decoded only for the frames used (o_k, g, and tau^o when the agent plans).
+memory; camera frames are decoded only for the frames used (o_k, g, and tau^o when the agent plans), or all
+once into RAM with ``cache_frames`` (:mod:`lerobot_efm.frames`), and resized to the policy's image shape.
 Keys produced (every ``observation.<key>`` of the policy is mirrored):
 
     observation.<key>            o_k
@@ -33,6 +34,7 @@ from .configuration_efm import (
     is_mirror_key,
     mirror_key,
 )
+from .frames import DecodedFrames, fit_frames
 from .processor_efm import mirror_stats
 
 
@@ -49,6 +51,8 @@ class HindsightSpec:
     use_rl: bool = False
     with_obs_trajectory: bool = False
     observation_keys: tuple[str, ...] | None = None  # None: every observation.* feature of the dataset
+    image_shapes: tuple[tuple[str, tuple[int, ...]], ...] = ()  # (key, (C, H, W)) the policy takes
+    cache_frames: bool = False
 
     @classmethod
     def from_config(cls, config: EFMConfig) -> HindsightSpec:
@@ -63,6 +67,8 @@ class HindsightSpec:
             config.use_rl and config.uses_critic,
             config.uses_obs_trajectory,
             keys,
+            tuple((k, tuple(f.shape)) for k, f in config.image_features.items()),
+            config.cache_frames,
         )
 
     @property
@@ -125,6 +131,12 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
         self.episode_start = np.repeat(starts, lengths)
         self.episode_end = np.repeat(ends, lengths)  # exclusive
 
+        self.image_shapes = dict(self.spec.image_shapes)
+        self.frame_cache = {
+            key: DecodedFrames(base, key, self.episode_index, self.timestamps, self.image_shapes.get(key))
+            for key in (self.video_keys if self.spec.cache_frames else [])
+        }
+
     # --- LeRobotDataset compatibility: lerobot-train reads these from the dataset ----------------
     def __getattr__(self, name):
         if name.startswith("__") or name in ("_base", "spec", "_meta_view"):
@@ -181,7 +193,14 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
                 out[_name(key, prefix)] = _squeeze_single(self.vectors[key][r], prefix)
         flat = sorted({r for rs in rows.values() for r in rs})
         for key in [*self.image_keys, *self.video_keys]:
-            decoded = self._decode(key, flat) if key in self.video_keys else self._base.hf_dataset[flat][key]
+            if key in self.frame_cache:
+                decoded = self.frame_cache[key].frames(flat)
+            elif key in self.video_keys:
+                decoded = fit_frames(self._decode(key, flat), self.image_shapes.get(key))
+            else:
+                decoded = fit_frames(
+                    torch.stack(self._base.hf_dataset[flat][key]), self.image_shapes.get(key)
+                )
             frames = dict(zip(flat, decoded, strict=True))
             transform = (
                 self._base.image_transforms

@@ -155,6 +155,41 @@ def test_video_decodes_only_the_frames_it_uses(video_dataset, decode_counter, po
         assert decode_counter == [len(used)] and len(used) <= (2 if policy_type == "efm_ac" else 2 + 3)
 
 
+def test_cached_frames_are_the_decoded_frames(video_dataset, decode_counter):
+    """``cache_frames`` decodes every frame once, in order, then serves items without decoding: same images."""
+    plain = HindsightGoalDataset(video_dataset, tiny_config("efm_pc"))
+    decode_counter.clear()
+    cached = HindsightGoalDataset(video_dataset, tiny_config("efm_pc", cache_frames=True))
+    assert sum(decode_counter) == len(video_dataset)  # each frame once, at construction
+    decode_counter.clear()
+    for k in (0, 20, 47, 99):
+        torch.manual_seed(k)
+        a = plain[k]
+        torch.manual_seed(k)
+        b = cached[k]
+        for key in ("observation.images.top", "observation.goal.images.top", "observation.traj.images.top"):
+            assert torch.allclose(a[key], b[key], atol=1e-6), key
+    assert len(decode_counter) == 4  # the plain wrapper's calls only
+
+
+def test_frames_are_resized_to_the_policy_image_shape(video_dataset):
+    """A policy taking 16x16 frames from a 32x32 recording gets 2x2 box averages, cached or not."""
+    keys = dict(
+        observation_keys=("observation.images.top", "observation.state"),
+        image_shapes=(("observation.images.top", (3, 16, 16)),),
+    )
+    plain = HindsightGoalDataset(video_dataset, spec(**keys))
+    cached = HindsightGoalDataset(video_dataset, spec(**keys, cache_frames=True))
+    box = video_dataset[5]["observation.images.top"].reshape(3, 16, 2, 16, 2).mean((2, 4))
+    torch.manual_seed(0)
+    a = plain[5]["observation.images.top"]
+    torch.manual_seed(0)
+    b = cached[5]["observation.images.top"]
+    assert a.shape == b.shape == (3, 16, 16)
+    assert torch.allclose(a, box, atol=1e-5)
+    assert torch.allclose(b, box, atol=0.5 / 255 + 1e-6)  # the cache keeps uint8
+
+
 def test_short_episode_is_refused_with_its_index(state_dataset):
     """Episodes of 60 frames are not longer than a 6 x 10 trajectory window: ValueError names them."""
     with pytest.raises(ValueError, match=r"\(0, 60\).*trajectory window"):
