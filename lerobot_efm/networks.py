@@ -281,8 +281,10 @@ class ImpalaEncoder(nn.Module):
 
     def forward(self, images: Tensor) -> Tensor:
         lead = images.shape[:-3]
-        out = self.head(self.stacks(images.reshape(-1, *images.shape[-3:]) - 0.5))
-        return out.reshape(*lead, -1)
+        # channels-last: the CPU kernels of max-pool and convolution run 1.6-2.4x faster on it (64x64 frames,
+        # forward + backward); same values, so checkpoints do not depend on it.
+        x = (images.reshape(-1, *images.shape[-3:]) - 0.5).contiguous(memory_format=torch.channels_last)
+        return self.head(self.stacks(x)).reshape(*lead, -1)
 
 
 class ObservationEncoder(nn.Module):

@@ -159,6 +159,14 @@ def test_impala_output_shape_and_leading_dims(size):
     assert out.shape == (2, 3, 16) and torch.allclose(out[1, 2], enc(images[1, 2][None])[0], atol=1e-5)
 
 
+def test_impala_channels_last_is_a_speed_choice_only():
+    """The encoder runs channels-last; its output is the plain channels-first network's (same weights)."""
+    enc = ImpalaEncoder((3, 32, 32), out_dim=16, channels=(4, 8, 8), hidden_dim=16).eval()
+    images = torch.rand(3, 3, 32, 32)
+    plain = enc.head(enc.stacks(images - 0.5))
+    assert torch.allclose(enc(images), plain, atol=1e-5)
+
+
 def test_impala_default_flattens_128px_to_8192_features():
     """The reference IMPALA-small turns 128x128 images into 32*16*16 = 8192 features before its MLP."""
     enc = ImpalaEncoder((3, 128, 128))
