@@ -175,6 +175,7 @@ class EFMAgent(nn.Module, abc.ABC):
             config.image_encoder_dropout,
             config.state_encoder,
             config.state_latent_dim,
+            config.state_fourier_frequencies,
         )
         self.latent_dim = self.encoder.latent_dim
         self.action_dim = config.output_features["action"].shape[0]

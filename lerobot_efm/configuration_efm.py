@@ -108,7 +108,9 @@ class EFMConfig(PreTrainedConfig):
         mlp_hidden_dims: hidden layers of the MLP flows (critics, planner, world model).
         image_latent_dim, image_encoder_channels, image_encoder_hidden_dim, image_encoder_dropout: IMPALA-small
             encoder, one per camera.
-        state_encoder: "identity" (reference) or "mlp" for vector observations; state_latent_dim for "mlp".
+        state_encoder: "identity" (reference), "mlp" or "fourier" for vector observations; state_latent_dim
+            for "mlp". "fourier" appends sin/cos(2^k pi x) for k < state_fourier_frequencies to each normalised
+            coordinate (no parameters): a critic on raw positions reads a maze as open space for long.
     """
 
     n_obs_steps: int = 1
@@ -158,6 +160,7 @@ class EFMConfig(PreTrainedConfig):
     image_encoder_dropout: float = 0.2
     state_encoder: str = "identity"
     state_latent_dim: int = 128
+    state_fourier_frequencies: int = 6
 
     # LeRobot normalises observations, goals (with the statistics of the observation they mirror) and
     # actions; MIN_MAX maps positions to [-1, 1] like the reference's raw planar coordinates.
@@ -209,6 +212,7 @@ class EFMConfig(PreTrainedConfig):
             "rl_ramp_steps": self.rl_ramp_steps >= 0,
             "rl_target_cap": self.rl_target_cap is None or self.rl_target_cap > 0,
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
+            "state_fourier_frequencies": self.state_fourier_frequencies >= 0,
             "goal_advance_distance": self.goal_advance_distance >= 0.0,
             "goal_advance_key": self.goal_advance_key is None or bool(self.goal_advance_key.strip()),
             "n_action_steps": 1
@@ -228,6 +232,10 @@ class EFMConfig(PreTrainedConfig):
             )
         if self.action_mode not in ("absolute", "velocity"):
             raise ValueError(f"action_mode must be 'absolute' or 'velocity', got {self.action_mode!r}.")
+        if self.state_encoder not in ("identity", "mlp", "fourier"):
+            raise ValueError(
+                f"state_encoder must be 'identity', 'mlp' or 'fourier', got {self.state_encoder!r}."
+            )
         if self.trajectory_source not in ("unit_ball", "gaussian"):
             raise ValueError(
                 f"trajectory_source must be 'unit_ball' or 'gaussian', got {self.trajectory_source!r}."

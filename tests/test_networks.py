@@ -234,6 +234,19 @@ def test_observation_encoder_mlp_size_and_invalid_choice():
         observation_encoder("conv")
 
 
+def test_observation_encoder_fourier_features():
+    """ "fourier" keeps each coordinate and appends sin/cos(2^k pi x), k < K: (1 + 2K) features a coordinate."""
+    enc = observation_encoder("fourier", state_fourier_frequencies=3)
+    assert enc.latent_dim == 8 + (3 + 2) * 7
+    obs = observation()
+    obs["observation.state"] = torch.tensor([[0.5, -0.25]]).expand(4, 2)
+    state = enc(obs)[:, 8 + 3 * 7 :]  # vector keys sorted: environment_state, then state
+    x = torch.tensor([0.5, -0.25])
+    angles = (x[:, None] * torch.pi * torch.tensor([1.0, 2.0, 4.0])).flatten()
+    assert torch.allclose(state[0], torch.cat([x, angles.sin(), angles.cos()]), atol=1e-6)
+    assert torch.allclose(state[0, 2], torch.tensor(1.0))  # sin(pi / 2)
+
+
 @pytest.mark.parametrize("kernel,stride,padding", [(3, 1, 1), (3, 2, 1), (1, 1, 0)])
 @pytest.mark.parametrize("length", [1, 2, 8, 16])
 def test_temporal_conv_gemm_path_equals_the_convolution(kernel, stride, padding, length):

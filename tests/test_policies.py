@@ -245,6 +245,8 @@ def test_config_contract_and_validation():
         tiny_config("efm_ac", action_traj_len=12)
     with pytest.raises(ValueError, match="rl_goal_ratio"):
         tiny_config("efm_ac", rl_goal_ratio=1.5)
+    with pytest.raises(ValueError, match="state_encoder.*'conv'"):
+        tiny_config("efm_ac", state_encoder="conv")
 
 
 def test_ema_follows_reference_low_pass(state_dataset):
