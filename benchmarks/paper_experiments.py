@@ -17,7 +17,8 @@ Suites:
 Budgets: the full paper budget is 200k steps at batch 128 (``--device cuda``, the configs' values). On CPU the
 default is ``CPU_STEPS`` steps at batch ``CPU_BATCH`` (stated in the report); the EMA cutoff then shrinks to
 ``steps / 10`` when that is shorter than the paper's (an EMA with a 5000-update cutoff barely moves in 2000
-updates), and LeRobot's cosine schedule scales its warm-up/decay to the budget by itself.
+updates), and LeRobot's cosine schedule scales its warm-up/decay down to a shorter budget by itself; a budget
+longer than the config's ``scheduler_decay_steps`` stretches the decay to it.
 
 Resumable: a cell whose ``result.json`` exists under ``--work-dir`` is not re-run; a finished training whose
 evaluation is missing is only re-evaluated. Datasets are generated once under ``--data-root``. Cells of
@@ -369,6 +370,11 @@ def train_command(
     ]
     if budget.ema_cutoff is not None:
         cmd.append(f"--policy.ema_cutoff={budget.ema_cutoff:g}")
+    config = json.loads((REPO_ROOT / "train_configs" / config_name(suite, budget)).read_text())["policy"]
+    if budget.steps > config.get("scheduler_decay_steps", 200_000):
+        # LeRobot shrinks the cosine schedule to a shorter budget but never stretches it: past the config's
+        # decay steps the learning rate would stay at 0 and the rest of the run would not learn.
+        cmd.append(f"--policy.scheduler_decay_steps={budget.steps}")
     if budget.num_workers is not None:
         cmd.append(f"--num_workers={budget.num_workers}")
     return cmd + list(budget.train_args)

@@ -141,6 +141,10 @@ def test_budget_config_seed_and_curve_name_the_runs():
     assert any(a.endswith("train_configs/planar_push_efm_cpu.json") for a in cmd)
     assert "--seed=3" in cmd and "--save_freq=3000" in cmd and "--policy.type=efm_pc" in cmd
     assert budget.ema_cutoff is None  # 12000 / 10 >= the config's 1000: its own cutoff
+    assert not any(a.startswith("--policy.scheduler_decay_steps") for a in cmd)  # the config's 12000
+    longer = pe.resolve_budget(budget_args(steps=24000, config="planar_push_efm_cpu.json"), suite)
+    longer_cmd = pe.train_command(suite, "ac", Path("data"), "local/x", Path("out"), longer)
+    assert "--policy.scheduler_decay_steps=24000" in longer_cmd  # LeRobot would hold lr = 0 after 12000
     with pytest.raises(ValueError, match="no such file"):
         pe.resolve_budget(budget_args(config="nope.json"), suite)
     with pytest.raises(ValueError, match="--curve-points"):
