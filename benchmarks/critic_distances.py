@@ -60,7 +60,7 @@ def ogbench_pairs(dataset: str, max_steps: int = 1000) -> tuple[np.ndarray, np.n
         goals.append(obs[GOAL_STATE_KEY])
         n = max_steps
         for t in range(max_steps):
-            _, _, terminated, _, info = env.step(oracle_direction(env.maze, exact_goal=True))
+            *_, info = env.step(oracle_direction(env.maze, exact_goal=True))
             if info["is_success"]:
                 n = t + 1
                 break

@@ -61,7 +61,6 @@ class DecodedFrames:
 
         meta = base.meta
         n = len(episode_index)
-        self.key = key
         self.array: np.ndarray | None = None  # (N, C, H, W) uint8, allocated at the first decoded chunk
         starts = np.flatnonzero(np.r_[True, episode_index[1:] != episode_index[:-1]])
         ends = np.r_[starts[1:], n]
