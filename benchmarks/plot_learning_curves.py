@@ -3,7 +3,8 @@
 
 Reads the JSON reports of ``benchmarks/paper_experiments.py`` runs made with ``--curve-points N`` (each cell
 holds ``curve``: one point per evaluated checkpoint) and draws one line per (dataset, agent, seed); cells of
-several reports (seeds, configs) go on the same axes, one panel per dataset.
+several reports (seeds, configs, ``--train-arg`` overrides such as ``--policy.state_encoder=fourier``) go on the
+same axes, one panel per dataset: one colour per agent, one line style per setting (config + overrides).
 
     .venv/bin/python benchmarks/plot_learning_curves.py benchmarks/results/planar_push_cpu_*.json \
         --out benchmarks/results/planar_push_cpu_curves.png
@@ -16,16 +17,30 @@ import json
 from pathlib import Path
 
 
+def overrides_name(train_args: list[str]) -> str:
+    """``['--policy.state_encoder=fourier']`` -> ``'state_encoder=fourier'``: what set a run apart."""
+    return " ".join(arg.removeprefix("--").removeprefix("policy.") for arg in train_args)
+
+
 def load_cells(reports: list[Path]) -> list[dict]:
-    """Every cell with a learning curve, tagged with its report's config and seed."""
+    """Every cell with a learning curve, tagged with its report's seed and setting (config + overrides)."""
     cells = []
     for path in reports:
         payload = json.loads(path.read_text())
         budget = payload.get("budget", {})
+        overrides = overrides_name(budget.get("train_args", []))
         for cell in payload.get("cells", []):
             if cell.get("curve"):
                 config = Path(cell.get("config") or payload.get("config", "")).stem
-                cells.append({**cell, "seed": cell.get("seed", budget.get("seed")), "config_name": config})
+                setting = f"{config} {overrides}".strip()
+                cells.append(
+                    {
+                        **cell,
+                        "seed": cell.get("seed", budget.get("seed")),
+                        "config_name": config,
+                        "setting": setting,
+                    }
+                )
     if not cells:
         raise ValueError(
             f"No cell with a learning curve in {[str(p) for p in reports]}; run the paper runner "
@@ -34,9 +49,9 @@ def load_cells(reports: list[Path]) -> list[dict]:
     return cells
 
 
-def label(cell: dict, several_configs: bool) -> str:
+def label(cell: dict, several_settings: bool) -> str:
     text = f"{cell['agent']} (seed {cell['seed']})"
-    return f"{text} [{cell['config_name']}]" if several_configs else text
+    return f"{text} [{cell['setting']}]" if several_settings else text
 
 
 def plot(cells: list[dict], out: Path, title: str) -> None:
@@ -46,17 +61,18 @@ def plot(cells: list[dict], out: Path, title: str) -> None:
     import matplotlib.pyplot as plt
 
     datasets = sorted({c["dataset"] for c in cells})
-    several_configs = len({c["config_name"] for c in cells}) > 1
-    agents = sorted({label(c, several_configs).split(" (")[0] for c in cells})
+    settings = sorted({c["setting"] for c in cells})
+    several_settings = len(settings) > 1
+    styles = {s: ("-", "--", ":", "-.")[i % 4] for i, s in enumerate(settings)}
+    agents = sorted({c["agent"] for c in cells})
     colours = {a: plt.cm.tab10(i % 10) for i, a in enumerate(agents)}
     fig, axes = plt.subplots(2, len(datasets), figsize=(5.2 * len(datasets), 7.5), squeeze=False)
     for col, dataset in enumerate(datasets):
         for cell in sorted(
-            (c for c in cells if c["dataset"] == dataset), key=lambda c: (c["agent"], c["seed"])
+            (c for c in cells if c["dataset"] == dataset), key=lambda c: (c["agent"], c["setting"], c["seed"])
         ):
-            name = label(cell, several_configs)
-            style = "--" if several_configs and "cpu" not in cell["config_name"] else "-"
-            colour = colours[name.split(" (")[0]]
+            name = label(cell, several_settings)
+            style, colour = styles[cell["setting"]], colours[cell["agent"]]
             success = [p["pc_success"] for p in cell["curve"]]
             axes[0, col].plot(
                 [p["step"] for p in cell["curve"]], success, style, marker="o", color=colour, label=name
@@ -71,7 +87,7 @@ def plot(cells: list[dict], out: Path, title: str) -> None:
             axes[row, col].set_ylabel("success (%)")
             axes[row, col].set_ylim(-3, 103)
             axes[row, col].grid(alpha=0.3)
-        axes[0, col].legend(fontsize=7)
+        axes[0, col].legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

@@ -358,6 +358,15 @@ def test_plot_learning_curves_draws_cells_with_curves(tmp_path):
     assert [(c["agent"], c["seed"], c["config_name"]) for c in cells] == [("FM-AC no-RL", 3, "x_cpu")]
     plot.main([str(report), "--out", str(tmp_path / "c.png")])
     assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+    # The same config with a --train-arg override is another setting: its own label, not the raw run's.
+    fourier = tmp_path / "f.json"
+    payload = json.loads(report.read_text())
+    payload["budget"]["train_args"] = ["--policy.state_encoder=fourier"]
+    fourier.write_text(json.dumps(payload))
+    both = plot.load_cells([report, fourier])
+    assert [c["setting"] for c in both] == ["x_cpu", "x_cpu state_encoder=fourier"]
+    assert plot.label(both[1], several_settings=True) == "FM-AC no-RL (seed 3) [x_cpu state_encoder=fourier]"
+    plot.main([str(report), str(fourier), "--out", str(tmp_path / "both.png")])
     report.write_text(json.dumps({"cells": [{"agent": "FM-GC", "dataset": "full"}]}))
     with pytest.raises(ValueError, match="--curve-points"):
         plot.load_cells([report])
