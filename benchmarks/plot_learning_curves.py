@@ -4,7 +4,8 @@
 Reads the JSON reports of ``benchmarks/paper_experiments.py`` runs made with ``--curve-points N`` (each cell
 holds ``curve``: one point per evaluated checkpoint) and draws one line per (dataset, agent, seed); cells of
 several reports (seeds, configs, ``--train-arg`` overrides such as ``--policy.state_encoder=fourier``) go on the
-same axes, one panel per dataset: one colour per agent, one line style per setting (config + overrides).
+same axes, one panel per dataset: one colour per agent, one line style per setting (config, overrides,
+steps).
 
     .venv/bin/python benchmarks/plot_learning_curves.py benchmarks/results/planar_push_cpu_*.json \
         --out benchmarks/results/planar_push_cpu_curves.png
@@ -23,7 +24,7 @@ def overrides_name(train_args: list[str]) -> str:
 
 
 def load_cells(reports: list[Path]) -> list[dict]:
-    """Every cell with a learning curve, tagged with its report's seed and setting (config + overrides)."""
+    """Every cell with a learning curve, tagged with its report's seed and setting (config, overrides, budget)."""
     cells = []
     for path in reports:
         payload = json.loads(path.read_text())
@@ -32,7 +33,8 @@ def load_cells(reports: list[Path]) -> list[dict]:
         for cell in payload.get("cells", []):
             if cell.get("curve"):
                 config = Path(cell.get("config") or payload.get("config", "")).stem
-                setting = f"{config} {overrides}".strip()
+                budget_steps = f"{budget['steps'] // 1000}k steps" if budget.get("steps") else ""
+                setting = " ".join(part for part in (config, overrides, budget_steps) if part)
                 cells.append(
                     {
                         **cell,
@@ -87,7 +89,7 @@ def plot(cells: list[dict], out: Path, title: str) -> None:
             axes[row, col].set_ylabel("success (%)")
             axes[row, col].set_ylim(-3, 103)
             axes[row, col].grid(alpha=0.3)
-        axes[0, col].legend(fontsize=7, loc="lower right")
+        axes[0, col].legend(fontsize=7, loc="best")
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

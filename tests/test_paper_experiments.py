@@ -361,11 +361,14 @@ def test_plot_learning_curves_draws_cells_with_curves(tmp_path):
     # The same config with a --train-arg override is another setting: its own label, not the raw run's.
     fourier = tmp_path / "f.json"
     payload = json.loads(report.read_text())
-    payload["budget"]["train_args"] = ["--policy.state_encoder=fourier"]
+    payload["budget"].update(train_args=["--policy.state_encoder=fourier"], steps=24000)
     fourier.write_text(json.dumps(payload))
     both = plot.load_cells([report, fourier])
-    assert [c["setting"] for c in both] == ["x_cpu", "x_cpu state_encoder=fourier"]
-    assert plot.label(both[1], several_settings=True) == "FM-AC no-RL (seed 3) [x_cpu state_encoder=fourier]"
+    assert [c["setting"] for c in both] == ["x_cpu", "x_cpu state_encoder=fourier 24k steps"]
+    assert (
+        plot.label(both[1], several_settings=True)
+        == "FM-AC no-RL (seed 3) [x_cpu state_encoder=fourier 24k steps]"
+    )
     plot.main([str(report), str(fourier), "--out", str(tmp_path / "both.png")])
     report.write_text(json.dumps({"cells": [{"agent": "FM-GC", "dataset": "full"}]}))
     with pytest.raises(ValueError, match="--curve-points"):
