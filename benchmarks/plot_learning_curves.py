@@ -89,10 +89,16 @@ def plot(cells: list[dict], out: Path, title: str) -> None:
             axes[row, col].set_ylabel("success (%)")
             axes[row, col].set_ylim(-3, 103)
             axes[row, col].grid(alpha=0.3)
-        axes[0, col].legend(fontsize=7, loc="best")
+        # Below the panels: long setting names would hide the curves.
+        axes[1, col].legend(
+            *axes[0, col].get_legend_handles_labels(),
+            fontsize=7,
+            loc="upper center",
+            bbox_to_anchor=(0.5, -0.15),
+        )
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    fig.savefig(out, dpi=110, bbox_inches="tight")
     plt.close(fig)
 
 
