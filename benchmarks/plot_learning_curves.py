@@ -30,10 +30,10 @@ def load_cells(reports: list[Path]) -> list[dict]:
         payload = json.loads(path.read_text())
         budget = payload.get("budget", {})
         overrides = overrides_name(budget.get("train_args", []))
+        budget_steps = f"{budget['steps'] // 1000}k steps" if budget.get("steps") else ""
         for cell in payload.get("cells", []):
             if cell.get("curve"):
                 config = Path(cell.get("config") or payload.get("config", "")).stem
-                budget_steps = f"{budget['steps'] // 1000}k steps" if budget.get("steps") else ""
                 setting = " ".join(part for part in (config, overrides, budget_steps) if part)
                 cells.append(
                     {
