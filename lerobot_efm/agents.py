@@ -367,8 +367,9 @@ class FMAC(EFMAgent):
 
     def act(self, l_obs, l_goal):
         d = self.critic_distance(l_obs, l_goal)
+        asked = self.config.actor_distance_scale * d
         action = self.actor.sample(
-            torch.cat([l_obs, l_goal, d[:, None]], -1), self.config.num_inference_steps
+            torch.cat([l_obs, l_goal, asked[:, None]], -1), self.config.num_inference_steps
         )
         return {"action": action, "distance": d}
 
@@ -391,7 +392,8 @@ class FMPC(EFMAgent):
     def act(self, l_obs, l_goal):
         steps = self.config.num_inference_steps
         d = self.critic_distance(l_obs, l_goal)
-        plan = self.planner.sample(torch.cat([l_obs, l_goal, d[:, None]], -1), steps)
+        asked = self.config.actor_distance_scale * d
+        plan = self.planner.sample(torch.cat([l_obs, l_goal, asked[:, None]], -1), steps)
         action = self.actor.sample(torch.cat([l_obs, plan.flatten(1)], -1), steps)
         return {"action": action, "distance": d, "obs_plan": plan}
 

@@ -68,6 +68,10 @@ class EFMConfig(PreTrainedConfig):
     Inference:
         num_inference_steps: Euler steps of every flow integration (reference: 20).
         critic_inference_eps: the extremum query eps of Critic(eps | o, g); 0 gives the minimum distance.
+        actor_distance_scale: FM-AC's actor and FM-PC's planner are conditioned on this times the critic's
+            distance (1.0 = the paper). Below 1 asks for a faster route than the critic believes in: a probe
+            of a critic that overestimates, e.g. after eq. 5's bootstrap (the reported distance stays the
+            critic's).
         num_candidates: number of sampled plans scored by the critic in FM-PS / FM-AS (rejection sampling).
         n_action_steps: control steps executed from each predicted chunk before replanning (receding horizon);
             with action_traj_stride > 1 the chunk is interpolated to the control rate first.
@@ -125,6 +129,7 @@ class EFMConfig(PreTrainedConfig):
 
     num_inference_steps: int = 20
     critic_inference_eps: float = 0.0
+    actor_distance_scale: float = 1.0
     num_candidates: int = 64
     n_action_steps: int = 6
 
@@ -212,6 +217,7 @@ class EFMConfig(PreTrainedConfig):
             "rl_ramp_steps": self.rl_ramp_steps >= 0,
             "rl_target_cap": self.rl_target_cap is None or self.rl_target_cap > 0,
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
+            "actor_distance_scale": self.actor_distance_scale > 0.0,
             "state_fourier_frequencies": self.state_fourier_frequencies >= 0,
             "goal_advance_distance": self.goal_advance_distance >= 0.0,
             "goal_advance_key": self.goal_advance_key is None or bool(self.goal_advance_key.strip()),

@@ -447,6 +447,25 @@ def test_goal_conditions_the_actor_or_planner_beyond_the_distance(policy_type):
     assert not torch.allclose(act(batch[GOAL]), act(-batch[GOAL]))
 
 
+@pytest.mark.parametrize("policy_type", ["efm_ac", "efm_pc"])
+def test_actor_distance_scale_conditions_on_that_fraction_of_the_critics_distance(policy_type):
+    """FM-AC's actor / FM-PC's planner read actor_distance_scale * d~ while the reported distance stays d~.
+    Fails if the scale is ignored, applied twice, or leaks into the distance the goal sequencer reads."""
+    policy = make(policy_type, actor_distance_scale=0.5)
+    policy.eval()
+    agent = policy.ema_model
+    agent.critic_distance = lambda obs, goal: torch.full((obs.shape[0],), 0.8)
+    flow = agent.actor if policy_type == "efm_ac" else agent.planner
+    sample, conditions = flow.sample, []
+    flow.sample = lambda cond, steps: (conditions.append(cond[:, -1].clone()), sample(cond, steps))[1]
+    batch = hand_batch(policy.config, 3)
+    policy.predict_action_chunk({STATE: batch[STATE], GOAL: batch[GOAL]})
+    assert_close(conditions[0], torch.full((3,), 0.4))
+    assert_close(policy.last_prediction["distance"], torch.full((3,), 0.8 * policy.config.max_goal_distance))
+    with pytest.raises(ValueError, match="actor_distance_scale=0.0"):
+        state_config(policy_type, actor_distance_scale=0.0)
+
+
 def _spearman(a, b):
     ra, rb = a.argsort().argsort().double(), b.argsort().argsort().double()
     ra, rb = ra - ra.mean(), rb - rb.mean()
