@@ -129,6 +129,15 @@ class Rows:
     actions: Tensor  # (N, L_a, A) action trajectory tau^a
     obs_traj: Tensor | None  # (N, L_o, D) latent observation trajectory tau^o (stop-gradient targets)
 
+    def select(self, keep: Tensor) -> Rows:
+        return Rows(
+            self.obs[keep],
+            self.goal[keep],
+            self.distance[keep],
+            self.actions[keep],
+            None if self.obs_traj is None else self.obs_traj[keep],
+        )
+
     def cat(self, other: Rows) -> Rows:
         return Rows(
             torch.cat([self.obs, other.obs]),
@@ -150,6 +159,11 @@ class TrainingRows:
     goal_conditioned: Rows
     goal_free: Rows
     num_bootstrap: int = 0  # eq. (5) rows at the end of goal_conditioned
+    distance_conditioned: Rows | None = None  # for the actor / planner on d, if not all of goal_conditioned
+
+    def for_distance_conditioned(self) -> Rows:
+        """Rows of the components conditioned on (o, g, d): FM-AC's actor, FM-PC's planner."""
+        return self.goal_conditioned if self.distance_conditioned is None else self.distance_conditioned
 
 
 # --------------------------------------------------------------------------------------------------
@@ -265,32 +279,46 @@ class EFMAgent(nn.Module, abc.ABC):
             rows = rows.cat(reached)
         goal_free = rows
 
-        if use_rl:
-            head = {k: v[:n_rl] for k, v in batch.items() if k.startswith((GOAL_PREFIX, RL_GOAL_PREFIX))}
-            rows = rows.cat(
-                self.bootstrap_rows(
-                    head,
-                    target,
-                    l_obs[:n_rl],
-                    latents[2][:n_rl],
-                    distance[:n_rl],
-                    actions[:n_rl],
-                    None if obs_traj is None else obs_traj[:n_rl],
-                )
-            )
-        return TrainingRows(rows, goal_free, n_rl)
+        if not use_rl:
+            return TrainingRows(rows, goal_free)
+        head = {k: v[:n_rl] for k, v in batch.items() if isinstance(v, Tensor)}
+        boot, near_shortest = self.bootstrap_rows(
+            head,
+            target,
+            l_obs[:n_rl],
+            latents[2][:n_rl],
+            distance[:n_rl],
+            actions[:n_rl],
+            None if obs_traj is None else obs_traj[:n_rl],
+        )
+        distance_conditioned = None if near_shortest is None else rows.cat(boot.select(near_shortest))
+        return TrainingRows(rows.cat(boot), goal_free, n_rl, distance_conditioned)
 
     @torch.no_grad()
-    def bootstrap_rows(self, batch, target: EFMAgent, l_obs, l_rl_goal, distance, actions, obs_traj) -> Rows:
-        """Eq. (5): d' = d + max_e C_e^ema(eps_e | g, g'), eps_e ~ U(0, r_g), with EMA encoder and critics."""
+    def bootstrap_rows(
+        self, batch, target: EFMAgent, l_obs, l_rl_goal, distance, actions, obs_traj
+    ) -> tuple[Rows, Tensor | None]:
+        """Eq. (5): d' = d + max_e C_e^ema(eps_e | g, g'), eps_e ~ U(0, r_g), with EMA encoder and critics.
+
+        With ``rl_actor_slack`` also which rows have d' <= (1 + slack) Critic_ema(0 | o, g'): their chunk is on
+        a near-shortest route to g'. The others head elsewhere first; conditioned on d' alone an actor needs
+        a long training to tell them apart, and meanwhile learns their detours.
+        """
         cfg = self.config
-        t_goal, t_rl_goal = target.encode(batch, (GOAL_PREFIX, RL_GOAL_PREFIX))
+        filtered = cfg.rl_actor_slack is not None
+        prefixes = (GOAL_PREFIX, RL_GOAL_PREFIX) + ((OBS_PREFIX,) if filtered else ())
+        t_goal, t_rl_goal, *t_obs = target.encode(batch, prefixes)
         eps = torch.rand(cfg.num_critics, l_obs.shape[0], device=l_obs.device) * cfg.rl_goal_ratio
         bridge = target.critic.query(torch.cat([t_goal, t_rl_goal], -1), eps, cfg.num_inference_steps).amax(0)
         stitched = distance + bridge
         if cfg.rl_target_cap is not None:  # keeps the bootstrap from feeding on a runaway critic
             stitched = stitched.clamp(max=cfg.rl_target_cap)
-        return Rows(l_obs, l_rl_goal, stitched, actions, obs_traj)
+        near_shortest = None
+        if filtered:
+            near_shortest = stitched <= (1.0 + cfg.rl_actor_slack) * target.critic_distance(
+                t_obs[0], t_rl_goal
+            )
+        return Rows(l_obs, l_rl_goal, stitched, actions, obs_traj), near_shortest
 
     def critic_loss(self, rows: Rows) -> Tensor:
         return self.critic.loss(torch.cat([rows.obs, rows.goal], -1), rows.distance)
@@ -314,6 +342,8 @@ class EFMAgent(nn.Module, abc.ABC):
         if n_rl:
             bootstrap = rows.goal_conditioned.distance[-n_rl:]
             info["rl_target_distance"] = bootstrap.mean().item() * self.config.max_goal_distance
+            kept = rows.for_distance_conditioned().obs.shape[0] - (rows.goal_conditioned.obs.shape[0] - n_rl)
+            info["rl_actor_rows"] = float(kept)
         return total, info
 
     # --- inference ---------------------------------------------------------------------------------
@@ -359,10 +389,10 @@ class FMAC(EFMAgent):
         self.actor = self._actor(2 * latent_dim + 1)
 
     def losses(self, rows):
-        r = rows.goal_conditioned
+        r, a = rows.goal_conditioned, rows.for_distance_conditioned()
         return {
             "critic": self.critic_loss(r),
-            "actor": self.actor.loss(torch.cat([r.obs, r.goal, r.distance[:, None]], -1), r.actions),
+            "actor": self.actor.loss(torch.cat([a.obs, a.goal, a.distance[:, None]], -1), a.actions),
         }
 
     def act(self, l_obs, l_goal):
@@ -382,10 +412,10 @@ class FMPC(EFMAgent):
         self.actor = self._actor(latent_dim * (1 + self.config.obs_traj_len))
 
     def losses(self, rows):
-        r, f = rows.goal_conditioned, rows.goal_free
+        r, f, p = rows.goal_conditioned, rows.goal_free, rows.for_distance_conditioned()
         return {
             "critic": self.critic_loss(r),
-            "planner": self.planner.loss(torch.cat([r.obs, r.goal, r.distance[:, None]], -1), r.obs_traj),
+            "planner": self.planner.loss(torch.cat([p.obs, p.goal, p.distance[:, None]], -1), p.obs_traj),
             "actor": self.actor.loss(torch.cat([f.obs, f.obs_traj.flatten(1)], -1), f.actions),
         }
 

@@ -87,6 +87,10 @@ class EFMConfig(PreTrainedConfig):
         rl_target_cap: cap of eq. 5's target d + bridge, in units of ``max_goal_distance`` (None = uncapped, the
             paper's setting). The target feeds on the EMA critic's own output: uncapped, a short CPU run's
             cross-region estimates ran away to 10x the expert's steps (the reference's stay under ~2).
+        rl_actor_slack: FM-AC's actor and FM-PC's planner learn only from the bootstrap rows whose target
+            d' <= (1 + slack) * Critic_ema(0 | o, g'), i.e. whose chunk is on a near-shortest route to g'; the
+            critics still learn from every row (None = every row for all, the paper's setting). A short run's
+            actor cannot yet tell detours from d' alone and learns them (pointmaze stitch: 40 -> 14 %).
 
     Deployment (a robot's observations carry no goal; :mod:`lerobot_efm.goal_source`):
         goal_path: a goal file (safetensors of one observation's ``observation.*`` keys, ``lerobot-efm-goal``).
@@ -138,6 +142,7 @@ class EFMConfig(PreTrainedConfig):
     rl_warmup_steps: int = 0
     rl_ramp_steps: int = 0
     rl_target_cap: float | None = None
+    rl_actor_slack: float | None = None
 
     goal_path: str | None = None
     goal_dataset_root: str | None = None
@@ -216,6 +221,7 @@ class EFMConfig(PreTrainedConfig):
             "rl_warmup_steps": self.rl_warmup_steps >= 0,
             "rl_ramp_steps": self.rl_ramp_steps >= 0,
             "rl_target_cap": self.rl_target_cap is None or self.rl_target_cap > 0,
+            "rl_actor_slack": self.rl_actor_slack is None or self.rl_actor_slack >= 0,
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
             "actor_distance_scale": self.actor_distance_scale > 0.0,
             "state_fourier_frequencies": self.state_fourier_frequencies >= 0,

@@ -156,6 +156,42 @@ def test_bootstrap_target_carries_no_gradient():
     assert grads and all(g is not None and g.abs().sum() > 0 for g in grads)
 
 
+@pytest.mark.parametrize("policy_type", ["efm_ac", "efm_pc"])
+def test_rl_actor_slack_keeps_near_shortest_bootstrap_rows_for_the_actor_only(policy_type):
+    """With r_g = 0 and a linear EMA critic, d' = d + C(0 | g, g'); slack 0.5 keeps for the actor / planner the
+    bootstrap rows with d' <= 1.5 C(0 | o, g'), while the critic learns from all. Fails if the filter is
+    ignored, compares against another pair than (o, g'), or reaches the critic's rows."""
+    policy = make(policy_type, use_rl=True, rl_goal_ratio=0.0, rl_actor_slack=0.5, reached_augment_size=2)
+    w, c = 0.2 * torch.randn(2, 4, generator=torch.Generator().manual_seed(3)), torch.tensor([0.5, 0.3])
+    policy.ema_model.critic.net = LinearVelocity(w, c)
+    n = 48
+    batch = hand_batch(policy.config, n)
+
+    def critic(a, b):
+        return (torch.cat([a, b], -1) @ w.T + c).amax(1)
+
+    d = batch[DIST] / policy.config.max_goal_distance
+    stitched = d + critic(batch[GOAL], batch[RL_GOAL])
+    keep = stitched <= 1.5 * critic(batch[STATE], batch[RL_GOAL])
+    assert 0 < keep.sum() < n
+    rows = policy.model.training_rows(batch, policy.ema_model)
+    critic_rows, actor_rows = rows.goal_conditioned, rows.for_distance_conditioned()
+    assert critic_rows.obs.shape[0] == n + 2 + n
+    assert actor_rows.obs.shape[0] == n + 2 + int(keep.sum())
+    assert_close(actor_rows.distance[n + 2 :], stitched[keep])
+    assert_close(actor_rows.goal[n + 2 :], batch[RL_GOAL][keep])
+    assert torch.equal(actor_rows.actions[n + 2 :], batch["action"][keep])
+
+    flow = policy.model.actor if policy_type == "efm_ac" else policy.model.planner
+    loss, seen = flow.loss, []
+    flow.loss = lambda cond, target: (seen.append(cond.shape[0]), loss(cond, target))[1]
+    _, info = policy.model.compute_loss(batch, policy.ema_model)
+    assert seen == [n + 2 + int(keep.sum())]
+    assert info["rl_actor_rows"] == keep.sum().item()
+    with pytest.raises(ValueError, match="rl_actor_slack=-0.1"):
+        state_config(policy_type, use_rl=True, rl_actor_slack=-0.1)
+
+
 # --------------------------------------------------------------------------------------------------
 # 2. EMA wiring (the lerobot-train side is in tests/test_resume_exact.py and tests/test_lerobot_cli.py)
 # --------------------------------------------------------------------------------------------------
