@@ -68,7 +68,10 @@ def plot(cells: list[dict], out: Path, title: str) -> None:
     styles = {s: ("-", "--", ":", "-.")[i % 4] for i, s in enumerate(settings)}
     agents = sorted({c["agent"] for c in cells})
     colours = {a: plt.cm.tab10(i % 10) for i, a in enumerate(agents)}
-    fig, axes = plt.subplots(2, len(datasets), figsize=(5.2 * len(datasets), 7.5), squeeze=False)
+    # A panel as wide as its longest legend line (7 pt), so that two legends side by side do not overlap.
+    longest = max(len(label(c, several_settings)) for c in cells)
+    width = max(5.2, 0.06 * longest + 0.8)
+    fig, axes = plt.subplots(2, len(datasets), figsize=(width * len(datasets), 7.5), squeeze=False)
     for col, dataset in enumerate(datasets):
         for cell in sorted(
             (c for c in cells if c["dataset"] == dataset), key=lambda c: (c["agent"], c["setting"], c["seed"])
