@@ -23,8 +23,9 @@ def overrides_name(train_args: list[str]) -> str:
     return " ".join(arg.removeprefix("--").removeprefix("policy.") for arg in train_args)
 
 
-def load_cells(reports: list[Path]) -> list[dict]:
-    """Every cell with a learning curve, tagged with its report's seed and setting (config, overrides, budget)."""
+def load_cells(reports: list[Path], require_curve: bool = True) -> list[dict]:
+    """Every cell (with a learning curve unless ``require_curve`` is false), tagged with its report's seed and
+    setting (config, overrides, budget)."""
     cells = []
     for path in reports:
         payload = json.loads(path.read_text())
@@ -32,7 +33,7 @@ def load_cells(reports: list[Path]) -> list[dict]:
         overrides = overrides_name(budget.get("train_args", []))
         budget_steps = f"{budget['steps'] // 1000}k steps" if budget.get("steps") else ""
         for cell in payload.get("cells", []):
-            if cell.get("curve"):
+            if cell.get("curve") or not require_curve:
                 config = Path(cell.get("config") or payload.get("config", "")).stem
                 setting = " ".join(part for part in (config, overrides, budget_steps) if part)
                 cells.append(
@@ -43,7 +44,7 @@ def load_cells(reports: list[Path]) -> list[dict]:
                         "setting": setting,
                     }
                 )
-    if not cells:
+    if not cells and require_curve:
         raise ValueError(
             f"No cell with a learning curve in {[str(p) for p in reports]}; run the paper runner "
             "with --curve-points N (N > 1)"

@@ -373,3 +373,42 @@ def test_plot_learning_curves_draws_cells_with_curves(tmp_path):
     report.write_text(json.dumps({"cells": [{"agent": "FM-GC", "dataset": "full"}]}))
     with pytest.raises(ValueError, match="--curve-points"):
         plot.load_cells([report])
+
+
+def test_seed_means_groups_seeds_of_one_setting(tmp_path):
+    sys.path.insert(0, str(REPO / "benchmarks"))  # seed_means imports the plotter's loader, as a script does
+    try:
+        spec = importlib.util.spec_from_file_location("seed_means", REPO / "benchmarks" / "seed_means.py")
+        means = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(means)
+    finally:
+        sys.path.remove(str(REPO / "benchmarks"))
+
+    def report(name, seed, success, curve, train_args=()):
+        path = tmp_path / name
+        cell = {
+            "agent": "FM-AC use-RL",
+            "dataset": "partitioned",
+            "pc_success": success,
+            "mean_sum_reward": 0.5,
+        }
+        cell["curve"] = [{"step": 10, "train_min": 1.0, "pc_success": p} for p in curve]
+        budget = {"seed": seed, "steps": 12000, "train_args": list(train_args)}
+        path.write_text(json.dumps({"budget": budget, "config": "c.json", "cells": [cell]}))
+        return str(path)
+
+    reports = [
+        report("a.json", 2000, 30.0, [10.0, 40.0]),
+        report("b.json", 1000, 20.0, [20.0]),
+        report("c.json", 1000, 60.0, [60.0], ["--policy.rl_actor_slack=0.2"]),
+    ]
+    rows = means.group_rows(means.load_cells([tmp_path / r for r in reports], require_curve=False))
+    assert [(r["setting"], r["seeds"], r["success"], r["peak"]) for r in rows] == [
+        ("c 12k steps", [1000, 2000], [20.0, 30.0], [20.0, 40.0]),
+        ("c rl_actor_slack=0.2 12k steps", [1000], [60.0], [60.0]),
+    ]
+    table = means.main(reports)
+    assert "| 20 / 30 | 25.0 ± 7.1 | 20 / 40 | 30.0 ± 14.1 | 50 / 50 | 50.0 ± 0.0 |" in table
+    assert "| 60 | 60.0 |" in table
+    with pytest.raises(ValueError, match="seed 1000 .* in two reports"):
+        means.main([*reports, reports[1]])
