@@ -69,6 +69,8 @@ def plot(cells: list[dict], out: Path, title: str) -> None:
     styles = {s: ("-", "--", ":", "-.")[i % 4] for i, s in enumerate(settings)}
     agents = sorted({c["agent"] for c in cells})
     colours = {a: plt.cm.tab10(i % 10) for i, a in enumerate(agents)}
+    # Seeds of one agent and setting share colour and line style: the marker tells them apart.
+    markers = {s: "os^Dv"[i % 5] for i, s in enumerate(sorted({c["seed"] for c in cells}, key=str))}
     # A panel as wide as its longest legend line (7 pt), so that two legends side by side do not overlap.
     longest = max(len(label(c, several_settings)) for c in cells)
     width = max(5.2, 0.06 * longest + 0.8)
@@ -78,14 +80,14 @@ def plot(cells: list[dict], out: Path, title: str) -> None:
             (c for c in cells if c["dataset"] == dataset), key=lambda c: (c["agent"], c["setting"], c["seed"])
         ):
             name = label(cell, several_settings)
-            style, colour = styles[cell["setting"]], colours[cell["agent"]]
+            style, colour, marker = styles[cell["setting"]], colours[cell["agent"]], markers[cell["seed"]]
             success = [p["pc_success"] for p in cell["curve"]]
             axes[0, col].plot(
-                [p["step"] for p in cell["curve"]], success, style, marker="o", color=colour, label=name
+                [p["step"] for p in cell["curve"]], success, style, marker=marker, color=colour, label=name
             )
             minutes = [p["train_min"] for p in cell["curve"]]
             if all(m is not None for m in minutes):
-                axes[1, col].plot(minutes, success, style, marker="o", color=colour, label=name)
+                axes[1, col].plot(minutes, success, style, marker=marker, color=colour, label=name)
         axes[0, col].set_title(f"{title}: {dataset}")
         axes[0, col].set_xlabel("training steps")
         axes[1, col].set_xlabel("training minutes (one CPU core)")
