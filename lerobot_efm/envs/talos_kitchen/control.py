@@ -14,12 +14,13 @@ exploited: the commanded orientation is tracked as given.
 
 Grasp simplification (:class:`GraspWeld`, alias :class:`PotWeld`): a one-hand pinch on a round bar
 cannot hold the off-axis pot (it swings), so when the gripper command is > 0.5 and both finger
-sides (fingertips 1-2 and fingertip 3) touch the pot, an (initially inactive) weld equality between
+jaws (fingertips 1-2 and fingertip 3, each with its links) touch the pot, an (initially inactive) weld equality between
 the left gripper and the pot is activated at the current relative pose. The same gating activates
 a ball-joint (connect) equality at the TCP for the door handle (and the tray handle): the door then
 follows the hand's position along its arc while the handle may turn in the hand. Everything is
-released as soon as the gripper command drops below 0.5. The tray is normally pulled/pushed by the
-friction pinch alone (the fingers' inner links close on its box bar before the fingertips do).
+released as soon as the gripper command drops below 0.5. The jaws' inner links close on the tray's
+box bar before the fingertips do, so the links count as jaws (the tray handle welds too); when the
+jaws clamp two objects at once, the one clamped nearest the TCP is welded.
 """
 
 from __future__ import annotations
@@ -104,8 +105,8 @@ def validate_command(command: np.ndarray) -> np.ndarray:
 class GraspWeld:
     """Weld-on-contact grasps of the pot, the door handle and the tray handle.
 
-    Gating (identical for every object): gripper command > 0.5 **and** both finger sides (fingertips
-    1-2 and fingertip 3) in contact with the object's grasp geoms (any pot geom; the door / tray
+    Gating (identical for every object): gripper command > 0.5 **and** both jaws (fingertips 1-2 with
+    their links, fingertip 3 with its links) in contact with the object's grasp geoms (any pot geom; the door / tray
     handle geoms). Then the object's inactive weld equality is activated at the current relative
     pose; all welds are released as soon as the gripper command drops below 0.5. At most one weld is
     active at a time. The door and tray welds use a small ``torquescale`` (rotation about the bar is
@@ -123,9 +124,14 @@ class GraspWeld:
             self.targets.append(("tray", handles.tray_weld, handles.tray_body, handles.tray_handle_geoms))
 
     def both_sides_touch(self, data: mujoco.MjData, geoms: frozenset | None = None) -> bool:
+        return self._clamp_distance(data, self.h.pot_geoms if geoms is None else geoms) is not None
+
+    def _clamp_distance(self, data: mujoco.MjData, geoms: frozenset) -> float | None:
+        """Distance from the TCP to the nearest jaw contact on ``geoms`` if both jaws touch them, else None."""
         h = self.h
-        geoms = h.pot_geoms if geoms is None else geoms
         side_a = side_b = False
+        nearest = np.inf
+        tcp = data.site_xpos[h.left_tcp]
         for i in range(data.ncon):
             c = data.contact[i]
             g1, g2 = int(c.geom1), int(c.geom2)
@@ -133,9 +139,12 @@ class GraspWeld:
                 g1, g2 = g2, g1
             if g2 not in geoms:
                 continue
-            side_a |= g1 in h.finger_geoms_a
-            side_b |= g1 in h.finger_geoms_b
-        return side_a and side_b
+            a, b = g1 in h.finger_geoms_a, g1 in h.finger_geoms_b
+            side_a |= a
+            side_b |= b
+            if a or b:
+                nearest = min(nearest, float(np.linalg.norm(c.pos - tcp)))
+        return nearest if side_a and side_b else None
 
     def active(self, data: mujoco.MjData) -> str | None:
         """Name of the welded object ("pot", "door", "tray") or None."""
@@ -152,39 +161,41 @@ class GraspWeld:
             return
         if self.active(data) is not None:
             return
-        for name, eq, body, geoms in self.targets:
-            if not self.both_sides_touch(data, geoms):
-                continue
-            p1, p2 = data.xpos[h.left_gripper_body], data.xpos[body]
-            q1, q2 = data.xquat[h.left_gripper_body], data.xquat[body]
-            r1 = data.xmat[h.left_gripper_body].reshape(3, 3)
-            rel_q = np.zeros(4)
-            q1_inv = np.zeros(4)
-            mujoco.mju_negQuat(q1_inv, q1)
-            mujoco.mju_mulQuat(rel_q, q1_inv, q2)
-            # weld data layout: anchor (3), relpose pos (3), relpose quat (4), torquescale (1)
-            tcp = data.site_xpos[h.left_tcp]
-            if self.model.eq_type[eq] == mujoco.mjtEq.mjEQ_CONNECT:
-                # connect data layout: anchor in body1 (gripper) frame (3), anchor in body2 frame (3)
-                d = np.zeros(6)
-                d[0:3] = r1.T @ (tcp - p1)
-                d[3:6] = data.xmat[body].reshape(3, 3).T @ (tcp - p2)
-                _set_eq_data(self.model, data, eq, d)
-                data.eq_active[eq] = 1
-                return
-            d = np.zeros(11)
-            # weld point = TCP (between the fingertips): data[0:3] is it in the object (body2) frame
-            # and data[3:6] in the gripper (body1) frame, so a low torquescale lets the object
-            # pivot about the grasp point
-            tcp = data.site_xpos[h.left_tcp]
-            r2 = data.xmat[body].reshape(3, 3)
-            d[0:3] = r2.T @ (tcp - p2)
-            d[3:6] = r1.T @ (tcp - p1)
-            d[6:10] = rel_q
-            d[10] = self.TORQUESCALE[name]
+        # the jaws may clamp two objects at once (the tray handle and the pot standing on the tray):
+        # take the one clamped nearest the TCP, i.e. the one the hand was aimed at
+        clamped = [(d, t) for t in self.targets if (d := self._clamp_distance(data, t[3])) is not None]
+        if not clamped:
+            return
+        _, (name, eq, body, _) = min(clamped, key=lambda x: x[0])
+        p1, p2 = data.xpos[h.left_gripper_body], data.xpos[body]
+        q1, q2 = data.xquat[h.left_gripper_body], data.xquat[body]
+        r1 = data.xmat[h.left_gripper_body].reshape(3, 3)
+        rel_q = np.zeros(4)
+        q1_inv = np.zeros(4)
+        mujoco.mju_negQuat(q1_inv, q1)
+        mujoco.mju_mulQuat(rel_q, q1_inv, q2)
+        # weld data layout: anchor (3), relpose pos (3), relpose quat (4), torquescale (1)
+        tcp = data.site_xpos[h.left_tcp]
+        if self.model.eq_type[eq] == mujoco.mjtEq.mjEQ_CONNECT:
+            # connect data layout: anchor in body1 (gripper) frame (3), anchor in body2 frame (3)
+            d = np.zeros(6)
+            d[0:3] = r1.T @ (tcp - p1)
+            d[3:6] = data.xmat[body].reshape(3, 3).T @ (tcp - p2)
             _set_eq_data(self.model, data, eq, d)
             data.eq_active[eq] = 1
             return
+        d = np.zeros(11)
+        # weld point = TCP (between the fingertips): data[0:3] is it in the object (body2) frame
+        # and data[3:6] in the gripper (body1) frame, so a low torquescale lets the object
+        # pivot about the grasp point
+        tcp = data.site_xpos[h.left_tcp]
+        r2 = data.xmat[body].reshape(3, 3)
+        d[0:3] = r2.T @ (tcp - p2)
+        d[3:6] = r1.T @ (tcp - p1)
+        d[6:10] = rel_q
+        d[10] = self.TORQUESCALE[name]
+        _set_eq_data(self.model, data, eq, d)
+        data.eq_active[eq] = 1
 
 
 PotWeld = GraspWeld  # backwards-compatible name

@@ -109,9 +109,9 @@ class TalosKitchenEnv(gym.Env):
         if render_mode != "rgb_array":
             raise ValueError(f"render_mode must be 'rgb_array', got {render_mode!r}")
         os.environ.setdefault("MUJOCO_GL", "egl")
-        from . import control, scene  # imports MuJoCo
+        from . import control, grasps, scene  # imports MuJoCo
 
-        self._scene, self._control = scene, control
+        self._scene, self._control, self._grasps = scene, control, grasps
         self.image_size = int(image_size)
         self.render_mode = render_mode
         self.render_size = int(render_size or image_size)
@@ -290,7 +290,11 @@ class TalosKitchenEnv(gym.Env):
     def _info(self) -> dict:
         err = self.success_errors()
         ok = err["door_error"] < DOOR_TOL and err["tray_error"] < TRAY_TOL and err["pot_error"] < POT_TOL
-        return {"is_success": bool(ok), "task": self.task, **err}
+        # grasp state as numbers, so lerobot-eval infos and rerun rollouts (info/<key>) show when a
+        # closure held an object (held: 0 none, 1 pot, 2 door, 3 tray; see grasps.HELD_CODE)
+        held = self._grasps.HELD_CODE[self._grasps.welded(self.data, self.h)]
+        closure = self._scene.gripper_opening(self.data, self.h)
+        return {"is_success": bool(ok), "task": self.task, **err, "held": held, "grip_closure": closure}
 
     # ------------------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict | None = None):

@@ -24,8 +24,9 @@ Each sub-task is a :mod:`.primitives` generator stepped lazily (it reads ``env.d
 wrapped in human-like imperfections:
 
 * detour: with p = 0.3 a free-space via point before an object sub-task;
-* aborted grasp: with p = 0.15 approach the handle (+- 1.5 cm), half of the times close the gripper
-  short of it, open, back off 10 cm, then do the real sub-task (which re-approaches);
+* aborted grasp: with p = 0.15 approach the handle (+- 1.5 cm sideways, stopping 6-9 cm short),
+  half of the times close the gripper there until the fingers meet (a miss seen as a fully closed gripper, never a half-closed
+  one), open, back off 10 cm, then do the real sub-task (which re-approaches);
 * speed: every sub-task is slowed by a factor U(1, 1.3) (linear interpolation between commands;
   never faster than the primitives, whose grasp waits assume physics advances);
 * pauses: p = 0.006 per command of holding 0.2-1 s mid-motion;
@@ -63,6 +64,9 @@ NOISE_STD = 0.003  # m per axis
 NOISE_TAU = 0.4  # s
 P_DETOUR, P_ABORT, P_PAUSE_STEP, P_PARTIAL = 0.3, 0.15, 0.006, 0.2
 STRETCH = (1.0, 1.3)
+MISSED_GRASP_CLOSURE = 0.9  # measured closure at which the operator sees that a grasp missed
+MISSED_GRASP_MAX_STEPS = 60  # ... or gives up waiting (2.4 s)
+MISSED_GRASP_SHORT = (0.06, 0.09)  # m short of the handle where aborted grasps stop
 TRAY_TOP_Z = scene.TRAY_POS0[2] + 0.008  # pot base height when placed on the tray floor
 _TRAY_FLOOR = 0.009  # pot base above the tray body origin once settled (env.TRAY_FLOOR)
 _DOOR_CLOSED_MAX = -DOOR_TOL  # door angle above this counts as closed (tray may be operated)
@@ -190,6 +194,7 @@ class TalosPlayOperator:
         self._ou_a = float(np.exp(-1.0 / (P.CTRL_HZ * NOISE_TAU)))
         self.stats: dict[str, dict[str, int]] = {}
         self.current: str | None = None
+        self.missing_grasp = False  # inside a deliberate missed grasp (see _missed_grasp)
         self._stream: Iterator[np.ndarray] | None = None
         self._check = None
         self._last = self._home.copy()
@@ -234,6 +239,7 @@ class TalosPlayOperator:
         self._last[9] = P.OPEN
         self._noise = np.zeros(3)
         self._stream, self._check, self.current = None, None, None
+        self.missing_grasp = False
         return obs
 
     def act(self, obs: dict | None = None) -> np.ndarray:
@@ -292,6 +298,12 @@ class TalosPlayOperator:
             cand = self.feasible()
             names = list(cand)
             p = np.array([cand[n] for n in names])
+            if not names or p.sum() <= 0:
+                door, tray, pot, _ = self.read_state()
+                raise ValueError(
+                    f"no sub-task with a positive weight is feasible in the state door={door:.2f} "
+                    f"tray={tray:.3f} pot on {pot}: weights {self.weights}; give 'home' or 'wander' a weight"
+                )
             kind = names[int(self.rng.choice(len(names), p=p / p.sum()))]
             kind, gen = getattr(self, f"_plan_{kind}")()
         self.current = kind
@@ -345,15 +357,37 @@ class TalosPlayOperator:
         if r.random() < P_ABORT:
             direction = np.asarray(direction, float) / np.linalg.norm(direction)
             off = r.normal(0.0, 0.015, 3)
+            off -= (off @ direction) * direction  # sideways only: the stop distance alone says "short"
             pre = P.cmd(np.asarray(pos) - 0.12 * direction + off, mat, P.PRE)
-            near = P.cmd(np.asarray(pos) - r.uniform(0.03, 0.06) * direction + off, mat, P.PRE)
+            # stop 6-9 cm short: the fingertips (2.6 cm past the TCP) stay clear of the bar, so a
+            # missed grasp never touches, let alone holds, what the real grasp then takes
+            near = P.cmd(np.asarray(pos) - r.uniform(*MISSED_GRASP_SHORT) * direction + off, mat, P.PRE)
             yield from P.move(self._last, pre, speed=float(r.uniform(0.12, 0.22)))
             yield from P.move(pre, near, speed=0.08)
             if r.random() < 0.5:  # missed grasp: close short of the handle
-                yield from P.set_gripper(near, 0.8, steps=int(r.integers(6, 15)))
-                near = yield from P.release(near, steps=6, data=self.env.data, handles=self.env.h)
+                near = yield from self._missed_grasp(near)
             yield from P.hold(near, int(r.integers(3, 15)))
             yield from P.retreat(near, direction, 0.10, speed=0.12)
+
+    def _missed_grasp(self, near: np.ndarray):
+        """Close on air until the fingers meet, notice the miss, open (returns the open command).
+
+        The re-opening must be predictable from what a policy observes: it only ever follows a
+        gripper measured fully closed on nothing, never a half-closed one. An abort that opened
+        the gripper mid-closure (as before) looks exactly like the start of a real grasp and
+        taught policies to re-open grasps that were about to hold (issue 14).
+        """
+        closed = near.copy()
+        closed[9] = P.CLOSED
+        self.missing_grasp = True  # read by benchmarks/talos_grasps.py to tell misses from grasps
+        for _ in range(MISSED_GRASP_MAX_STEPS):
+            yield closed.copy()
+            if scene.gripper_opening(self.env.data, self.env.h) >= MISSED_GRASP_CLOSURE:
+                break
+        yield from P.hold(closed, int(self.rng.integers(2, 8)))
+        opened = yield from P.release(closed, steps=6, data=self.env.data, handles=self.env.h)
+        self.missing_grasp = False
+        return opened
 
     def _target(self, lo_hi_full, lo_hi_partial) -> tuple[float, bool]:
         partial = self.rng.random() < P_PARTIAL

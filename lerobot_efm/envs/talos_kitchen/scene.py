@@ -13,7 +13,11 @@ Robot (PAL Talos, Apache-2.0 model by PAL Robotics, via example-robot-data 6.0.0
 * 20 position actuators: torso 2 (kp 2000), head 2 (kp 100), arms 2 x 7 (kp 400), grippers 2
   (kp 20, +-3 N m; the 6 mimic joints per gripper follow through joint equalities). All critically
   damped (``dampratio = 1``). Armature 0.05 (grippers 0.005). Gripper joint friction lowered from
-  1.0 to 0.1 (with 1.0 the gripper closes at ~0.17 rad/s whatever the force).
+  the URDF's 1.0 to 0.01 on each of the 7 coupled gripper joints: the friction, not kp or the force
+  limit, sets the closing speed (measured on air, 25 Hz frames to 95 % closure: 78 at 0.1, 26 at
+  0.01, 24 at 0; kp 20 -> 1000 and +-3 -> 10 N m change nothing). At 0.1 a grasp needed a median
+  26 frames (1 s) from the close command to the weld, longer than a policy's replanning period,
+  and half-closed grippers were mistaken for aborted grasps (issue 14); at 0.01 it needs 7.
 * Robot self-collision is disabled (adjacent URDF collision meshes overlap): robot geoms use
   ``contype = 2, conaffinity = 1`` and the kitchen ``contype = 1, conaffinity = 3``.
 * URDF collision meshes are moved to geom group 3 (not rendered); visual meshes are group 1.
@@ -78,6 +82,14 @@ TORSO_JOINTS = ("torso_1_joint", "torso_2_joint")
 HEAD_JOINTS = ("head_1_joint", "head_2_joint")
 GRIPPER_JOINTS = ("gripper_left_joint", "gripper_right_joint")
 GRIPPER_CLOSED = -0.96  # gripper joint angle when fully closed (0 = open)
+# the two jaws of the left gripper: fingertips with their proximal links (the four-bar linkage's
+# inner and motor links). A bar can be clamped by the proximal links before the fingertips touch it
+# (the tray handle always is): counting only the fingertips left those grasps unwelded (issue 14).
+GRIPPER_SIDE_A = tuple(
+    f"gripper_left_{n}_link" for n in ("fingertip_1", "fingertip_2", "inner_double", "motor_double")
+)
+GRIPPER_SIDE_B = tuple(f"gripper_left_{n}_link" for n in ("fingertip_3", "inner_single", "motor_single"))
+GRIPPER_KP, GRIPPER_FORCE, GRIPPER_FRICTIONLOSS = 20.0, 3.0, 0.01  # N m / rad, N m, N m per gripper joint
 
 # Home posture (rad): left TCP near (0.30, 0.22, 1.0), fingers forward; right arm hanging (unused).
 HOME = {
@@ -161,14 +173,14 @@ def _robot_spec() -> mujoco.MjSpec:
         is_gripper = joint.name.startswith("gripper_")
         joint.armature = 0.005 if is_gripper else 0.05
         if is_gripper:
-            joint.frictionloss = 0.1
+            joint.frictionloss = GRIPPER_FRICTIONLOSS
 
     gains = {"torso": 2000.0, "head": 100.0, "arm": 400.0}
     for name in TORSO_JOINTS + HEAD_JOINTS + LEFT_ARM_JOINTS + RIGHT_ARM_JOINTS + GRIPPER_JOINTS:
         act = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         if name.startswith("gripper"):
-            act.set_to_position(kp=20.0, dampratio=1.0)
-            act.forcelimited, act.forcerange = True, [-3.0, 3.0]
+            act.set_to_position(kp=GRIPPER_KP, dampratio=1.0)
+            act.forcelimited, act.forcerange = True, [-GRIPPER_FORCE, GRIPPER_FORCE]
             act.ctrllimited, act.ctrlrange = True, [GRIPPER_CLOSED, 0.0]
         else:
             act.set_to_position(kp=gains[name.split("_")[0]], dampratio=1.0)
@@ -447,8 +459,8 @@ class KitchenHandles:
     pot_body: int
     pot_weld: int  # id of the (initially inactive) hand-pot weld equality
     camera: int  # id of the "front" camera
-    finger_geoms_a: frozenset  # collision geoms of fingertips 1-2 (one finger side)
-    finger_geoms_b: frozenset  # collision geoms of fingertip 3 (the opposite side)
+    finger_geoms_a: frozenset  # collision geoms of one jaw (fingertips 1-2 and their links)
+    finger_geoms_b: frozenset  # collision geoms of the opposite jaw (fingertip 3 and its links)
     pot_geoms: frozenset
     door_body: int = -1
     tray_body: int = -1
@@ -523,8 +535,8 @@ def _compile(image_size: int) -> tuple[mujoco.MjModel, KitchenHandles]:
         pot_body=pot_body,
         pot_weld=model.equality("pot_weld").id,
         camera=model.camera("front").id,
-        finger_geoms_a=geoms_of(["gripper_left_fingertip_1_link", "gripper_left_fingertip_2_link"]),
-        finger_geoms_b=geoms_of(["gripper_left_fingertip_3_link"]),
+        finger_geoms_a=geoms_of(GRIPPER_SIDE_A),
+        finger_geoms_b=geoms_of(GRIPPER_SIDE_B),
         pot_geoms=frozenset(g for g in range(model.ngeom) if model.geom_bodyid[g] == pot_body),
         door_body=model.body("door").id,
         tray_body=model.body("tray").id,
