@@ -303,6 +303,15 @@ def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
     assert abs(scalars(data[f"{ep}/objects/door"])[0, 0]) < 0.05
     assert "scene/table" in data and "scene/workspace" in data
     assert len(RrdReader(output).blueprints()) == 1
+    # the grasp state rides in the env infos: scalars in the rrd, closures classified in the results
+    for key in ("held", "touched", "grip_closure", "grip_command"):
+        assert [r["step"] for r in temporal(data[f"{ep}/info/{key}"])] == list(range(length)), key
+    commands = scalars(data[f"{ep}/info/grip_command"])[:, 0]
+    grasps = results[0]["grasps"]
+    assert grasps["closures"] == int(np.sum(np.diff(np.r_[0, commands > 0.5].astype(int)) == 1))
+    assert grasps["closures"] == sum(grasps[k] for k in ("held", "abandoned", "touched", "missed"))
+    texts = [str(r.get("TextLog:text")) for r in temporal(data[f"{ep}/events"])]
+    assert sum("closure" in t for t in texts) == grasps["closures"], texts
 
 
 def test_planar_push_is_drawn_as_effector_disc_and_walls(tmp_path):

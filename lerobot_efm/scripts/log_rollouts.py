@@ -130,6 +130,7 @@ def run_episode(
     task = _task_text(env)
     log.begin_episode(index, task=task, seed=seed)
     step, success, done, reward_sum = 0, False, False, 0.0
+    infos = []
     while not done and step < max_steps:
         obs = preprocess_observation(observation)
         obs["task"] = [task]
@@ -153,7 +154,8 @@ def run_episode(
         observation, reward, terminated, truncated, info = env.step(action_np)
         success = _success(info)
         reward_sum += float(reward[0])
-        log.log_outcome(step, float(reward[0]), success, _env0_info(info))
+        infos.append(_env0_info(info))
+        log.log_outcome(step, float(reward[0]), success, infos[-1])
         done = bool(terminated[0] or truncated[0])
         step += 1
         if not done:
@@ -174,8 +176,7 @@ def run_episode(
     if not done:  # stopped by max_steps: log where it ended
         obs = env_preprocessor(preprocess_observation(observation))
         log.log_observation(step, obs)
-    log.end_episode(step, success)
-    return {
+    result = {
         "episode": index,
         "seed": seed,
         "length": step,
@@ -183,6 +184,23 @@ def run_episode(
         "sum_reward": reward_sum,
         "task": task,
     }
+    if infos and "grip_command" in infos[0]:  # an env that reports its grasps (the Talos kitchen)
+        result["grasps"] = _log_grasps(log, infos)
+    log.end_episode(step, success)
+    return result
+
+
+def _log_grasps(log: RolloutLogger, infos: list[dict]) -> dict:
+    """Classify the episode's gripper closures, log one event per closure, return their summary."""
+    from lerobot_efm.envs.talos_kitchen import grasps
+
+    runs = grasps.closures([grasps.from_info(i) for i in infos])
+    for r in runs:
+        weld = f", held after {r.frames_to_weld} frames" if r.frames_to_weld is not None else ""
+        log.log_event(r.start, f"closure {r.start}-{r.end}: {r.outcome} {r.obj or ''}{weld}")
+    summary = grasps.summarize(runs)
+    summary.pop("per_object")
+    return summary
 
 
 def rollout(cfg: RolloutConfig) -> list[dict]:

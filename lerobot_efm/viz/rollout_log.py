@@ -309,6 +309,11 @@ class RolloutLogger:
             if v.dtype.kind in "fiub" and v.size == 1:
                 self._scalars(f"{ep}/info/{key}", [float(v.reshape(-1)[0])], [key])
 
+    def log_event(self, step: int, text: str) -> None:
+        """A text line in the episode's event log at ``step`` (e.g. how a grasp ended)."""
+        self.set_step(step)
+        self.rec.log(f"{self.ep}/events", rr.TextLog(text, level=rr.TextLogLevel.INFO))
+
     def end_episode(self, length: int, success: bool) -> None:
         """``length`` env steps were taken; on success, back-fill the true number of steps left."""
         ep = self.ep

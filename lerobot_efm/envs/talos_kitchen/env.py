@@ -290,11 +290,12 @@ class TalosKitchenEnv(gym.Env):
     def _info(self) -> dict:
         err = self.success_errors()
         ok = err["door_error"] < DOOR_TOL and err["tray_error"] < TRAY_TOL and err["pot_error"] < POT_TOL
-        # grasp state as numbers, so lerobot-eval infos and rerun rollouts (info/<key>) show when a
-        # closure held an object (held: 0 none, 1 pot, 2 door, 3 tray; see grasps.HELD_CODE)
-        held = self._grasps.HELD_CODE[self._grasps.welded(self.data, self.h)]
-        closure = self._scene.gripper_opening(self.data, self.h)
-        return {"is_success": bool(ok), "task": self.task, **err, "held": held, "grip_closure": closure}
+        return {
+            "is_success": bool(ok),
+            "task": self.task,
+            **err,
+            **self._grasps.info(self.data, self.h, self._cmd[9]),
+        }
 
     # ------------------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict | None = None):

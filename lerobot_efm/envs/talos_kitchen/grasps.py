@@ -96,6 +96,29 @@ def _still_closing(closing: Sequence[float]) -> bool:
     return len(closing) < 3 or closing[-1] - closing[-3] > RISING
 
 
+def info(data, handles: scene.KitchenHandles, command: float) -> dict:
+    """The grasp state as numbers for env infos, so lerobot-eval and rerun rollouts (``info/<key>``) carry it:
+    ``held`` / ``touched`` object codes (:data:`HELD_CODE`), ``grip_closure`` and ``grip_command``."""
+    s = sample(data, handles, command)
+    return {
+        "held": HELD_CODE[s.held],
+        "touched": HELD_CODE[s.touched],
+        "grip_closure": s.closure,
+        "grip_command": s.command,
+    }
+
+
+def from_info(info: dict) -> GraspSample:
+    """Inverse of :func:`info` (e.g. the per-step infos of a policy rollout)."""
+    name = {v: k for k, v in HELD_CODE.items()}
+    return GraspSample(
+        command=float(info["grip_command"]),
+        closure=float(info["grip_closure"]),
+        touched=name[int(info["touched"])],
+        held=name[int(info["held"])],
+    )
+
+
 def closures(samples: Sequence[GraspSample]) -> list[Closure]:
     """Split a trajectory into its closures and classify each (see the module docstring)."""
     out = []
