@@ -61,7 +61,7 @@ def record(root: Path, episodes: int, frames: int, threads: int) -> float:
     return time.perf_counter() - start
 
 
-def train(root: Path, out: Path, cache: bool, steps: int, log_freq: int, threads: int) -> dict:
+def train(root: Path, out: Path, cache: bool, steps: int, log_freq: int, threads: int, batch: int) -> dict:
     start = time.perf_counter()
     proc = subprocess.run(
         [
@@ -70,6 +70,7 @@ def train(root: Path, out: Path, cache: bool, steps: int, log_freq: int, threads
             f"--dataset.root={root}",
             "--dataset.repo_id=local/talos_bench_play",
             f"--policy.cache_frames={str(cache).lower()}",
+            f"--batch_size={batch}",
             f"--steps={steps}",
             f"--log_freq={log_freq}",
             f"--save_freq={steps}",
@@ -93,6 +94,7 @@ def train(root: Path, out: Path, cache: bool, steps: int, log_freq: int, threads
     cache_info = CACHE_LINE.search(text)
     return {
         "cache_frames": cache,
+        "batch": batch,
         "updt_s": updt,
         "data_s": data,
         "steps_per_s": 1.0 / (updt + data),
@@ -110,36 +112,46 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=2000, help="frames per recorded episode")
     ap.add_argument("--work-dir", default="outputs/bench_image_training")
     ap.add_argument("--out", default=None)
+    ap.add_argument(
+        "--batch-sizes",
+        type=int,
+        nargs="+",
+        default=[64],
+        help="cached-frame runs at each batch size (the per-sample decoding run uses the first)",
+    )
     args = ap.parse_args()
 
     work = REPO_ROOT / args.work_dir
     root = work / "play"
     record_s = record(root, args.episodes, args.frames, args.threads)
+    first = args.batch_sizes[0]
+    runs = [(False, first)] + [(True, b) for b in args.batch_sizes]
     rows = [
-        train(root, work / f"train_cache_{c}", c, args.steps, args.log_freq, args.threads)
-        for c in (False, True)
+        train(root, work / f"train_cache_{c}_b{b}", c, args.steps, args.log_freq, args.threads, b)
+        for c, b in runs
     ]
     load = os.getloadavg()
     lines = [
         "# Talos image training step on CPU: decoding per sample vs. frames cached once",
         "",
         f"Generated {datetime.now(UTC).isoformat(timespec='seconds')} by "
-        f"`benchmarks/bench_image_training.py --threads {args.threads} --steps {args.steps}` on {platform.node()} "
+        f"`benchmarks/bench_image_training.py --threads {args.threads} --steps {args.steps} "
+        f"--batch-sizes {' '.join(map(str, args.batch_sizes))}` on {platform.node()} "
         f"({os.cpu_count()} CPUs, Python {platform.python_version()}), load average at the end "
         f"{load[0]:.2f}, {load[1]:.2f}, {load[2]:.2f}.",
         "",
-        f"Config `{CONFIG}` (FM-AC no-RL, 64x64 camera + 20-D proprioception, batch 64), {args.threads} thread(s); "
+        f"Config `{CONFIG}` (FM-AC no-RL, 64x64 camera + 20-D proprioception), {args.threads} thread(s); "
         f"recording: {args.episodes} Talos play episodes x {args.frames} frames, 128x128 video"
         + (f" (recorded in {record_s:.0f} s)" if record_s else "")
         + ". Medians over lerobot-train's log windows of "
         f"{args.log_freq} steps, the first dropped.",
         "",
-        "| cache_frames | update s/step | data s/step | steps/s | run wall s | cache |",
-        "|---|---:|---:|---:|---:|---|",
+        "| cache_frames | batch | update s/step | data s/step | steps/s | run wall s | cache |",
+        "|---|---:|---:|---:|---:|---:|---|",
     ]
     for r in rows:
         lines.append(
-            f"| {str(r['cache_frames']).lower()} | {r['updt_s']:.3f} | {r['data_s']:.3f} | {r['steps_per_s']:.2f} | "
+            f"| {str(r['cache_frames']).lower()} | {r['batch']} | {r['updt_s']:.3f} | {r['data_s']:.3f} | {r['steps_per_s']:.2f} | "
             f"{r['wall_s']:.0f} | {r['cache'] or '–'} |"
         )
     report = "\n".join(lines) + "\n"
