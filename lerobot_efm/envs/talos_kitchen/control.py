@@ -123,9 +123,6 @@ class GraspWeld:
         if handles.tray_weld >= 0:
             self.targets.append(("tray", handles.tray_weld, handles.tray_body, handles.tray_handle_geoms))
 
-    def both_sides_touch(self, data: mujoco.MjData, geoms: frozenset | None = None) -> bool:
-        return self._clamp_distance(data, self.h.pot_geoms if geoms is None else geoms) is not None
-
     def _clamp_distance(self, data: mujoco.MjData, geoms: frozenset) -> float | None:
         """Distance from the TCP to the nearest jaw contact on ``geoms`` if both jaws touch them, else None."""
         h = self.h
