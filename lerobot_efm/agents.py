@@ -212,6 +212,15 @@ class EFMAgent(nn.Module, abc.ABC):
     def _obs_traj_flow(self, cond_dim: int) -> TrajectoryFlow:
         return TrajectoryFlow(self.config.obs_traj_len, self.latent_dim, cond_dim, self.config, "mlp")
 
+    def plan_target(self, obs_traj: Tensor) -> Tensor:
+        """What the Planner / World model learns: tau^o, or with ``obs_traj_relative`` tau^o - tau^o[0]
+        (tau^o[0] is the current observation's EMA latent, the frame the plan starts from)."""
+        return obs_traj - obs_traj[:, :1] if self.config.obs_traj_relative else obs_traj
+
+    def plan_from(self, sample: Tensor, l_obs: Tensor) -> Tensor:
+        """A sampled plan as latents: the inverse of ``plan_target`` (``l_obs`` (B, D) starts it)."""
+        return sample + l_obs[:, None] if self.config.obs_traj_relative else sample
+
     def encode(self, batch: dict[str, Tensor], prefixes: tuple[str, ...]) -> list[Tensor]:
         """Encode several mirrored key families in one encoder call (one batched pass per camera)."""
         keys = [k[len(OBS_PREFIX) :] for k in self.config.observation_features]
@@ -415,7 +424,9 @@ class FMPC(EFMAgent):
         r, f, p = rows.goal_conditioned, rows.goal_free, rows.for_distance_conditioned()
         return {
             "critic": self.critic_loss(r),
-            "planner": self.planner.loss(torch.cat([p.obs, p.goal, p.distance[:, None]], -1), p.obs_traj),
+            "planner": self.planner.loss(
+                torch.cat([p.obs, p.goal, p.distance[:, None]], -1), self.plan_target(p.obs_traj)
+            ),
             "actor": self.actor.loss(torch.cat([f.obs, f.obs_traj.flatten(1)], -1), f.actions),
         }
 
@@ -423,7 +434,9 @@ class FMPC(EFMAgent):
         steps = self.config.num_inference_steps
         d = self.critic_distance(l_obs, l_goal)
         asked = self.config.actor_distance_scale * d
-        plan = self.planner.sample(torch.cat([l_obs, l_goal, asked[:, None]], -1), steps)
+        plan = self.plan_from(
+            self.planner.sample(torch.cat([l_obs, l_goal, asked[:, None]], -1), steps), l_obs
+        )
         action = self.actor.sample(torch.cat([l_obs, plan.flatten(1)], -1), steps)
         return {"action": action, "distance": d, "obs_plan": plan}
 
@@ -442,13 +455,14 @@ class FMPS(EFMAgent):
         r, f = rows.goal_conditioned, rows.goal_free
         return {
             "critic": self.critic_loss(r),
-            "planner": self.planner.loss(f.obs, f.obs_traj),
+            "planner": self.planner.loss(f.obs, self.plan_target(f.obs_traj)),
             "actor": self.actor.loss(torch.cat([f.obs, f.obs_traj.flatten(1)], -1), f.actions),
         }
 
     def act(self, l_obs, l_goal):
         steps, n = self.config.num_inference_steps, self.config.num_candidates
-        plans = self.planner.sample(self.repeat_candidates(l_obs), steps)  # (B*N, L_o, D)
+        obs = self.repeat_candidates(l_obs)
+        plans = self.plan_from(self.planner.sample(obs, steps), obs)  # (B*N, L_o, D)
         scores = self.critic_distance(plans[:, -1], self.repeat_candidates(l_goal)).view(-1, n)
         plans = plans.view(l_obs.shape[0], n, *plans.shape[1:])
         plan, index = self.select_candidates(plans, scores)
@@ -478,14 +492,16 @@ class FMAS(EFMAgent):
         return {
             "critic": self.critic_loss(r),
             "actor": self.actor.loss(f.obs, f.actions),
-            "world": self.world.loss(torch.cat([f.obs, f.actions.flatten(1)], -1), f.obs_traj),
+            "world": self.world.loss(
+                torch.cat([f.obs, f.actions.flatten(1)], -1), self.plan_target(f.obs_traj)
+            ),
         }
 
     def act(self, l_obs, l_goal):
         steps, n = self.config.num_inference_steps, self.config.num_candidates
         obs = self.repeat_candidates(l_obs)
         chunks = self.actor.sample(obs, steps)  # (B*N, L_a, A)
-        futures = self.world.sample(torch.cat([obs, chunks.flatten(1)], -1), steps)
+        futures = self.plan_from(self.world.sample(torch.cat([obs, chunks.flatten(1)], -1), steps), obs)
         scores = self.critic_distance(futures[:, -1], self.repeat_candidates(l_goal)).view(-1, n)
         chunks = chunks.view(l_obs.shape[0], n, *chunks.shape[1:])
         action, index = self.select_candidates(chunks, scores)

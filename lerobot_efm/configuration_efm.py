@@ -108,6 +108,11 @@ class EFMConfig(PreTrainedConfig):
         critic_loss_weight: weight of each critic's flow loss (reference: 0.1).
         reached_augment_size: rows re-appended with g := o, d := 0 and a "stay" action chunk (reference: 32).
         trajectory_source: source of the trajectory flows, "unit_ball" (reference) or "gaussian".
+        obs_traj_relative: the Planner (FM-PC, FM-PS) and World model (FM-AS) learn tau^o - o, the plan's
+            displacements from the current latent, and add o back when sampling (False = absolute latents, the
+            reference). Absolute, a short run's planner adds position noise to what does not move: a planar
+            FM-PS planner at 12k steps moved a resting disc by 0.08 in 20 frames (the data: 0.00), and the
+            critic's argmin picked those teleports.
         ema_cutoff: cutoff period (in updates) of the low-pass EMA of all weights; EMA weights are used at
             inference and saved. ema_warmup_updates: the cutoff ramps up linearly over these first updates.
 
@@ -156,6 +161,7 @@ class EFMConfig(PreTrainedConfig):
     critic_loss_weight: float = 0.1
     reached_augment_size: int = 32
     trajectory_source: str = "unit_ball"
+    obs_traj_relative: bool = False
     ema_cutoff: float = 1000.0
     ema_warmup_updates: int = 100
 

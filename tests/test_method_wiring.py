@@ -349,6 +349,42 @@ def test_each_component_trains_on_its_table_i_conditioning(policy_type):
         assert torch.equal(target, getattr(r, target_field)), name
 
 
+PLAN_MODELS = {"efm_pc": "planner", "efm_ps": "planner", "efm_as": "world"}
+
+
+@pytest.mark.parametrize("policy_type", list(PLAN_MODELS))
+def test_obs_traj_relative_learns_displacements_and_plans_from_the_observation(policy_type):
+    """With ``obs_traj_relative`` the Planner / World model regresses tau^o - tau^o[0] (the actor still sees
+    absolute latents) and a sample s becomes the plan o + s. Fails if the target stays absolute, is taken
+    from another frame, or the observation is not added back (or added twice) at inference."""
+    name = PLAN_MODELS[policy_type]
+    policy = make(policy_type, obs_traj_relative=True, num_candidates=2)
+    agent, cfg = policy.model, policy.config
+    rows = agent.training_rows(hand_batch(cfg, 4), policy.ema_model)
+    seen = {}
+
+    def record(cond, target, _name):
+        seen[_name] = (cond, target)
+        return cond.sum() * 0
+
+    for component in TABLE_I[policy_type]:
+        getattr(agent, component).loss = lambda c, t, _n=component: record(c, t, _n)
+    agent.losses(rows)
+    r = rows.goal_conditioned if policy_type == "efm_pc" else rows.goal_free
+    assert torch.equal(seen[name][1], r.obs_traj - r.obs_traj[:, :1])
+    assert not torch.equal(seen[name][1], r.obs_traj)
+    if "actor" in seen and policy_type != "efm_as":
+        assert torch.equal(seen["actor"][0], torch.cat([r.obs, r.obs_traj.flatten(1)], -1))
+
+    ema = policy.ema_model
+    step = torch.tensor([0.1, -0.2])
+    displacement = step * torch.arange(cfg.obs_traj_len).reshape(1, -1, 1)
+    getattr(ema, name).sample = lambda cond, steps: displacement.expand(cond.shape[0], -1, -1).clone()
+    obs = torch.tensor([[0.3, 0.4], [-0.5, 0.6]])
+    out = ema.predict({STATE: obs, GOAL: -obs})
+    assert_close(out["obs_plan"], obs[:, None] + displacement)
+
+
 @pytest.mark.parametrize("policy_type", EFM_TYPES)
 def test_total_loss_weights_the_critic_only(policy_type):
     """total = critic_loss_weight * L_critic + the other losses. Fails if the weight is dropped or applied
