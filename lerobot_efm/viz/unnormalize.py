@@ -52,6 +52,17 @@ def _inverse_of(step):
     return _INVERSES[id(step)][1]
 
 
+def normalize(preprocessor, key: str, x: torch.Tensor) -> torch.Tensor:
+    """The policy preprocessor's normalisation of observation ``key`` alone (identity when it has none)."""
+    from lerobot.processor import TransitionKey
+    from lerobot.processor.converters import create_transition
+
+    step = _normalizer_step(preprocessor)
+    if step is None:
+        return x
+    return step(create_transition(observation={key: x}))[TransitionKey.OBSERVATION][key]
+
+
 def unnormalize(preprocessor, key: str, x: torch.Tensor) -> torch.Tensor:
     """Inverse of the policy preprocessor's normalisation of ``key`` (identity when it has none)."""
     from lerobot.processor import TransitionKey
