@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 from pathlib import Path
 
@@ -216,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     if args.out:
         args.out.write_text(
-            f"# Planned vs realized disc motion (planar push)\n\nCommand: `python {' '.join(sys.argv)}`\n\n{text}\n"
+            f"# Planned vs realized disc motion (planar push)\n\nCommand: `python {shlex.join(sys.argv)}`\n\n{text}\n"
         )
     return 0
 
