@@ -29,31 +29,40 @@ STATE = "observation.state"  # planar push: eff_x, eff_y, obj_x, obj_y
 CONTACT = 0.2 + 0.075 + 0.02  # disc radius + effector radius + slack: closer than this the hand can push
 
 
-def rollout(checkpoint: str, pair: int, steps: int, seed: int) -> dict[str, np.ndarray]:
-    """One episode; returns the realized states and, per replan step, the chosen (and candidate) plans."""
+def load(checkpoint: str):
+    """Policy config, policy and its processors, loaded once per checkpoint."""
     from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.envs.factory import make_env, make_env_pre_post_processors
-    from lerobot.envs.utils import preprocess_observation
     from lerobot.policies import make_policy, make_pre_post_processors
 
     import lerobot_efm  # noqa: F401  (registers the policies and the env)
     from lerobot_efm.envs.planar_push.env import PlanarPushEnvConfig
-    from lerobot_efm.viz.unnormalize import latent_to_states
 
-    env_cfg = PlanarPushEnvConfig(task=f"pair{pair}")
     cfg = PreTrainedConfig.from_pretrained(checkpoint)
     cfg.pretrained_path, cfg.device = checkpoint, "cpu"
+    policy = make_policy(cfg=cfg, env_cfg=PlanarPushEnvConfig()).eval()
+    pre, post = make_pre_post_processors(policy_cfg=cfg, pretrained_path=checkpoint)
+    return cfg, policy, pre, post
+
+
+def rollout(loaded, pair: int, steps: int, seed: int) -> dict[str, np.ndarray]:
+    """One episode; returns the realized states and, per replan step, the chosen (and candidate) plans."""
+    from lerobot.envs.factory import make_env, make_env_pre_post_processors
+    from lerobot.envs.utils import preprocess_observation
+
+    from lerobot_efm.envs.planar_push.env import PlanarPushEnvConfig
+    from lerobot_efm.viz.unnormalize import latent_to_states
+
+    cfg, policy, pre, post = loaded
+    env_cfg = PlanarPushEnvConfig(task=f"pair{pair}")
     envs = make_env(env_cfg, n_envs=1, use_async_envs=False)
     env = next(iter(next(iter(envs.values())).values()))
-    policy = make_policy(cfg=cfg, env_cfg=env_cfg).eval()
-    pre, post = make_pre_post_processors(policy_cfg=cfg, pretrained_path=checkpoint)
     env_pre, env_post = make_env_pre_post_processors(env_cfg=env_cfg, policy_cfg=cfg)
 
     def states_of(latent):
         out = latent_to_states(policy, pre, latent)
         if out is None:
             raise ValueError(
-                f"{checkpoint}: planned latents are not states (needs an identity state encoder)"
+                f"{cfg.pretrained_path}: planned latents are not states (needs an identity state encoder)"
             )
         return out[STATE][0]
 
@@ -144,22 +153,14 @@ def data_reference(root: Path, horizon: int) -> dict[str, float]:
     }
 
 
-def planner_on_recording(checkpoint: str, root: Path, n: int, seed: int) -> float | None:
+def planner_on_recording(loaded, root: Path, n: int, seed: int) -> float | None:
     """FM-PS's goal-free Planner sampled on ``n`` recorded states with the hand away from the disc: the
     median disc displacement of its plans (the recording's own is ~0: nothing pushes the disc)."""
-    from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.policies import make_policy, make_pre_post_processors
-
-    import lerobot_efm  # noqa: F401
-    from lerobot_efm.envs.planar_push.env import PlanarPushEnvConfig
     from lerobot_efm.viz.unnormalize import latent_to_states, normalize
 
-    cfg = PreTrainedConfig.from_pretrained(checkpoint)
+    cfg, policy, pre, _ = loaded
     if cfg.type != "efm_ps":
         return None
-    cfg.pretrained_path, cfg.device = checkpoint, "cpu"
-    policy = make_policy(cfg=cfg, env_cfg=PlanarPushEnvConfig(task="pair0")).eval()
-    pre, _ = make_pre_post_processors(policy_cfg=cfg, pretrained_path=checkpoint)
     states, _ = recorded_states(root)
     free = np.flatnonzero(np.linalg.norm(states[:, :2] - states[:, 2:], axis=-1) > CONTACT)
     pick = states[np.random.default_rng(seed).choice(free, n, replace=False)]
@@ -189,12 +190,13 @@ def main(argv: list[str] | None = None) -> int:
         label, sep, checkpoint = spec.partition("=")
         if not sep or not Path(checkpoint).is_dir():
             raise SystemExit(f"{spec!r}: expected LABEL=CHECKPOINT with an existing pretrained_model folder")
-        runs = [rollout(checkpoint, p, args.steps, args.seed) for p in args.pairs]
+        loaded = load(checkpoint)
+        runs = [rollout(loaded, p, args.steps, args.seed) for p in args.pairs]
         per_pair = [summarize(r) for r in runs]
         rows[label] = {k: float(np.nanmean([r[k] for r in per_pair])) for k in per_pair[0]}
         rows[label]["replans"] = sum(r["replans"] for r in per_pair)
         if args.dataset is not None:
-            on_data = planner_on_recording(checkpoint, args.dataset, 500, args.seed)
+            on_data = planner_on_recording(loaded, args.dataset, 500, args.seed)
             if on_data is not None:
                 rows[label]["planner on recorded states: disc move, hand away"] = on_data
     if args.dataset is not None:  # frames, not replans; its 'planned' move is the recorded one
