@@ -277,6 +277,32 @@ def test_expert_also_stops_in_open_space(env):
         assert _frames_at_rest(states) >= 35
 
 
+def _farthest_past_goal(states: np.ndarray, goal: np.ndarray) -> float:
+    """How far the disc went past ``goal`` along the direction it came from (from 0.3 out)."""
+    d = np.linalg.norm(states[:, 2:] - goal, axis=1)
+    i = int(np.argmax(d < 0.3))
+    return float(((states[i:, 2:] - goal) @ ((goal - states[i, 2:]) / d[i])).max())
+
+
+def test_expert_overshoots_open_space_goals_and_pushes_the_disc_back(env):
+    """With overshoot_share the expert brakes the disc past an open-space goal, then brings it back from the
+    other side: the data show the way back a policy needs when it overshoots (the plain expert never does)."""
+    past = {}
+    for share in (0.0, 1.0):
+        past[share] = []
+        for seed in range(2, 6):
+            op = ExpertReachGoal(env, np.random.default_rng(seed), corner_share=0.0, overshoot_share=share)
+            states, _, _, done = run_episode(env, op, 600)
+            if done:
+                assert np.linalg.norm(states[-1, 2:] - op.target) < SUCCESS_TOL
+                past[share].append(_farthest_past_goal(states, op.target))
+    assert len(past[0.0]) >= 3 and len(past[1.0]) >= 3, past
+    assert max(past[0.0]) < 0.04, past  # the plain expert stops on the goal
+    assert sum(p > 0.06 for p in past[1.0]) >= 2, past  # the overshooting one goes past it, and comes back
+    with pytest.raises(ValueError, match="overshoot_share"):
+        ExpertReachGoal(env, np.random.default_rng(0), overshoot_share=1.5)
+
+
 def test_play_pauses_hold_still(env):
     """Play pauses last 20-100 frames and follow half of the disc legs: disc and hand stay put meanwhile."""
     op = PlayFullSpace(env, np.random.default_rng(0))

@@ -129,6 +129,14 @@ PUSH_LOOKAHEAD = 0.35  # the disc is pushed at the farthest point of its grid pa
 # went to corners never showed a stop in open space (1 and 0 of 46,943 frames near those two goals).
 EXPERT_CORNER_SHARE = 0.75  # share of expert episodes aimed at a corner; the others at a random free spot
 OPEN_GOAL_HAND = 0.36  # an open-space goal's hand lies at most this far from its disc centre (contact: 0.275)
+# A braked push in open space has no wall to stop the disc: the scripted expert never overshot one (76 open-space
+# episodes: the disc never left 0.04 of its final spot once there), so the data never showed the way back, and
+# the policies that overshoot by 0.05-0.15 (FM-AC on the two open-space evaluation pairs) then hover behind a
+# disc that lies past the goal. In this share of the open-space episodes the expert overshoots, as a human does
+# now and then, and pushes the disc back from the other side.
+EXPERT_OVERSHOOT_SHARE = 0.5
+OVERSHOOT = (0.06, 0.15)  # how far past the goal such a push brakes the disc
+OVERSHOOT_ARM = 0.3  # decided once the disc is this close to its goal, along the direction it comes from
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -176,6 +184,12 @@ class Pusher:
         idx = np.argwhere(self.start_free)
         i, j = idx[rng.integers(len(idx))]
         return grid_point(i, j) + rng.uniform(-0.02, 0.02, 2)
+
+    def disc_fits(self, p: np.ndarray) -> bool:
+        """A disc at ``p`` leaves the hand room between it and every wall (to push it back from any side)."""
+        return wall_distance(p) >= OBJECT_RADIUS + START_MARGIN and (
+            self.region is None or inside_region(p, self.region, -REGION_OVERLAP)
+        )
 
     def sample_wall_disc(self, rng: np.random.Generator) -> np.ndarray:
         """A disc target against a wall, not in a corner (a disc wedged there cannot be pushed out): a free spot
@@ -339,7 +353,8 @@ class ExpertReachGoal:
     "Expert reach goal"): a corner with probability ``corner_share``, its last stretch slid along one of the
     corner's walls as play does it (the hand then ends where the corner evaluation goals have it), else a free
     spot in open space where the disc is braked, then the hand is moved to a random spot beside it (open-space
-    goals name the hand too); ``done`` once both rest there. With ``goal`` (4-D [eff, obj])
+    goals name the hand too; in ``overshoot_share`` of them the disc is first braked past the goal and pushed
+    back); ``done`` once both rest there. With ``goal`` (4-D [eff, obj])
     it keeps the env's current state as start, brings the disc to ``goal[2:]`` then the effector to ``goal[:2]``."""
 
     def __init__(
@@ -353,6 +368,7 @@ class ExpertReachGoal:
         rest: tuple[int, int] = EXPERT_REST,
         cursor_reach: float | None = CURSOR_REACH,
         corner_share: float = EXPERT_CORNER_SHARE,
+        overshoot_share: float = EXPERT_OVERSHOOT_SHARE,
     ):
         self.env, self.rng, self.noise, self.min_path, self.tol = (
             env,
@@ -364,6 +380,11 @@ class ExpertReachGoal:
         if not 0.0 <= corner_share <= 1.0:
             raise ValueError(f"corner_share must be in [0, 1], got {corner_share!r}")
         self.corner_share = float(corner_share)
+        if not 0.0 <= overshoot_share <= 1.0:
+            raise ValueError(f"overshoot_share must be in [0, 1], got {overshoot_share!r}")
+        self.overshoot_share = float(overshoot_share)
+        self._will_overshoot = False  # this episode overshoots its open-space goal (decided at reset)
+        self._overshoot: np.ndarray | None = None  # the spot past the goal the disc is braked on first
         self.cursor_reach = cursor_reach
         self.fixed_goal = None if goal is None else np.asarray(goal, dtype=np.float64).reshape(4)
         self.rest = (int(rest[0]), int(rest[1]))
@@ -379,6 +400,7 @@ class ExpertReachGoal:
 
     def reset(self) -> dict:
         self._done, self._pushing, self._rest_left, self._via, self._slide = False, True, None, None, None
+        self._will_overshoot, self._overshoot = False, None
         if self.fixed_goal is not None:
             self.effector_goal, self.target = self.fixed_goal[:2].copy(), self.fixed_goal[2:].copy()
             return self.env.observe()
@@ -396,6 +418,7 @@ class ExpertReachGoal:
             not to_corner
         ):  # an open-space goal names the hand too: placed beside the resting disc, as the eval's
             self.effector_goal = self.pusher.sample_effector(self.rng, self.target, near=OPEN_GOAL_HAND)
+            self._will_overshoot = bool(self.rng.random() < self.overshoot_share)
         eff = self.pusher.sample_effector(self.rng, obj, near=0.6)
         self.env.set_state(np.concatenate([eff, obj]))
         return self.env.observe()
@@ -411,6 +434,15 @@ class ExpertReachGoal:
             if np.linalg.norm(obj - self._via) > VIA_TOL:
                 return self._command(eff, self.pusher.push(s, self._via, final=True))
             self._via, self._slide = None, slide_direction(obj, self.target)
+        if self._will_overshoot and np.linalg.norm(obj - self.target) < OVERSHOOT_ARM:
+            self._will_overshoot = False
+            past = self.target + _unit(self.target - obj) * self.rng.uniform(*OVERSHOOT)
+            if self.pusher.disc_fits(past):  # never past the goal into a wall
+                self._overshoot = past
+        if self._overshoot is not None:
+            if np.linalg.norm(obj - self._overshoot) > self.tol:
+                return self._command(eff, self.pusher.push(s, self._overshoot, final=True))
+            self._overshoot = None  # braked past the goal: now back from the other side
         err = float(np.linalg.norm(obj - self.target))
         # hysteresis: stop pushing within tol, push again if the disc drifted past 1.5 tol
         self._pushing = err > (self.tol if self._pushing else 1.5 * self.tol)
