@@ -193,3 +193,55 @@ def test_lerobot_factory_keys():
         )
     finally:
         vec.close()
+
+
+def test_state_obs_type_renders_nothing_and_observes_the_same_states():
+    """``--env.obs_type=state`` (state policies' evaluation): no camera, no goal image, nothing rendered, and the
+    same states, goals and success as the default pixels_state env."""
+    cfg = TalosKitchenEnvConfig(task="open_door", image_size=SIZE, obs_type="state")
+    feats = env_to_policy_features(cfg)
+    assert {k: tuple(v.shape) for k, v in feats.items() if k != "action"} == {
+        k: v for k, v in POLICY_KEYS.items() if "images" not in k
+    }
+    pix = TalosKitchenEnv(task="open_door", image_size=SIZE)
+    state = TalosKitchenEnv(task="open_door", image_size=SIZE, obs_type="state")
+    try:
+        renders = []
+        state._renderer.render = lambda data: renders.append(1)  # counts any render of an observation
+        a, _ = pix.reset(seed=3)
+        b, _ = state.reset(seed=3)
+        assert set(b) == {"agent_pos", "environment_state", "goal.state", "goal.environment_state"}
+        assert state.observation_space.contains(b)
+        for _ in range(3):
+            a, _, _, _, info_a = pix.step(_hold(a))
+            b, _, _, _, info_b = state.step(_hold(b))
+        for key in b:
+            np.testing.assert_allclose(a[key], b[key], atol=1e-6, err_msg=key)
+        assert info_a["is_success"] == info_b["is_success"]
+        assert renders == []
+    finally:
+        pix.close()
+        state.close()
+    with pytest.raises(ValueError, match="obs_type='depth'"):
+        TalosKitchenEnvConfig(task="open_door", obs_type="depth")
+
+
+def test_suite_evaluates_state_policies_without_a_camera(tmp_path):
+    """benchmarks/talos_kitchen_suite.py asks lerobot-eval for the state-only env exactly when the checkpoint's
+    policy reads no camera (an image policy evaluated without one would fail on a missing key)."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "talos_kitchen_suite.py"
+    spec = importlib.util.spec_from_file_location("talos_kitchen_suite", path)
+    suite = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(suite)
+    for name, feats, expected in (
+        ("state", {"observation.state": {"type": "STATE", "shape": [20]}}, True),
+        ("image", {"observation.images.front": {"type": "VISUAL", "shape": [3, 64, 64]}}, False),
+    ):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "config.json").write_text(json.dumps({"input_features": feats}))
+        cmd = suite.eval_command(str(tmp_path / name), "open_door", 2, 64, 500, tmp_path / "out", [])
+        assert ("--env.obs_type=state" in cmd) is expected, cmd

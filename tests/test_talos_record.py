@@ -122,6 +122,42 @@ def test_train_and_eval_efm_ac_on_the_recording(talos_play, tmp_path):
     assert info["overall"]["n_episodes"] == 1 and 0.0 <= info["overall"]["pc_success"] <= 100.0
 
 
+def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
+    """The shipped state config trained by lerobot-train runs in lerobot-eval on ``--env.obs_type=state`` (what
+    benchmarks/talos_kitchen_suite.py uses for state policies: nothing rendered per step)."""
+    out = tmp_path / "train"
+    run(
+        BIN / "lerobot-train",
+        f"--config_path={PROJECT / 'train_configs' / 'talos_kitchen_efm_ac_state.json'}",
+        f"--dataset.repo_id={REPO}",
+        f"--dataset.root={talos_play}",
+        "--policy.max_goal_distance=60",
+        "--policy.mlp_hidden_dims=[32,32]",
+        "--policy.unet_down_dims=[8,16,16]",
+        "--policy.unet_n_groups=4",
+        "--policy.num_inference_steps=2",
+        "--steps=2",
+        "--batch_size=4",
+        "--save_freq=2",
+        "--log_freq=1",
+        f"--output_dir={out}",
+    )
+    run(
+        BIN / "lerobot-eval",
+        f"--policy.path={out / 'checkpoints' / 'last' / 'pretrained_model'}",
+        "--env.type=talos_kitchen",
+        "--env.task=open_door",
+        "--env.obs_type=state",
+        "--env.episode_length=8",
+        "--eval.n_episodes=1",
+        "--eval.batch_size=1",
+        "--policy.device=cpu",
+        f"--output_dir={tmp_path / 'eval'}",
+    )
+    info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
+    assert info["overall"]["n_episodes"] == 1
+
+
 @pytest.mark.parametrize(
     "config_file", sorted(p.name for p in (PROJECT / "train_configs").glob("talos_kitchen_*.json"))
 )
