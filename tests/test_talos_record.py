@@ -27,6 +27,23 @@ def run(*args, timeout=400):
     return proc
 
 
+def eval_one_episode(ckpt: Path, out: Path, *extra: str) -> dict:
+    """lerobot-eval of ``ckpt`` on one short open_door episode; its eval_info.json."""
+    run(
+        BIN / "lerobot-eval",
+        f"--policy.path={ckpt}",
+        "--env.type=talos_kitchen",
+        "--env.task=open_door",
+        "--env.episode_length=8",
+        "--eval.n_episodes=1",
+        "--eval.batch_size=1",
+        "--policy.device=cpu",
+        f"--output_dir={out}",
+        *extra,
+    )
+    return json.loads((out / "eval_info.json").read_text())
+
+
 @pytest.fixture(scope="module")
 def talos_play(tmp_path_factory):
     root = tmp_path_factory.mktemp("talos") / "play"
@@ -107,18 +124,7 @@ def test_train_and_eval_efm_ac_on_the_recording(talos_play, tmp_path):
     assert {"observation.images.front", "observation.goal.images.front", "observation.goal.state"} <= set(
         cfg["input_features"]
     )
-    run(
-        BIN / "lerobot-eval",
-        f"--policy.path={ckpt}",
-        "--env.type=talos_kitchen",
-        "--env.task=open_door",
-        "--env.episode_length=8",
-        "--eval.n_episodes=1",
-        "--eval.batch_size=1",
-        "--policy.device=cpu",
-        f"--output_dir={tmp_path / 'eval'}",
-    )
-    info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
+    info = eval_one_episode(ckpt, tmp_path / "eval")
     assert info["overall"]["n_episodes"] == 1 and 0.0 <= info["overall"]["pc_success"] <= 100.0
 
 
@@ -142,20 +148,8 @@ def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
         "--log_freq=1",
         f"--output_dir={out}",
     )
-    run(
-        BIN / "lerobot-eval",
-        f"--policy.path={out / 'checkpoints' / 'last' / 'pretrained_model'}",
-        "--env.type=talos_kitchen",
-        "--env.task=open_door",
-        "--env.obs_type=state",
-        "--env.episode_length=8",
-        "--eval.n_episodes=1",
-        "--eval.batch_size=1",
-        "--policy.device=cpu",
-        f"--output_dir={tmp_path / 'eval'}",
-    )
-    info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
-    assert info["overall"]["n_episodes"] == 1
+    ckpt = out / "checkpoints" / "last" / "pretrained_model"
+    assert eval_one_episode(ckpt, tmp_path / "eval", "--env.obs_type=state")["overall"]["n_episodes"] == 1
 
 
 @pytest.mark.parametrize(
