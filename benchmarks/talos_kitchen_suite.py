@@ -5,7 +5,9 @@ the raw numbers (JSON) with the exact commands.
 
     python benchmarks/talos_kitchen_suite.py --policy efm_ac=outputs/talos/ac/checkpoints/last/pretrained_model \\
         --policy efm_gc=outputs/talos/gc/checkpoints/last/pretrained_model --episodes 5 --jobs 2 \\
-        --out benchmarks/results/talos_kitchen_suite
+        --out benchmarks/results/talos_kitchen_suite --policy.n_action_steps=20
+
+Flags of ``lerobot-eval`` (``--policy.*``, ``--env.*``, ``--eval.*``) are passed on to every run.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from pathlib import Path
 from lerobot_efm.envs.talos_kitchen.tasks import LONG_TASK, TASK_NAMES, TASKS
 
 BIN = Path(sys.executable).parent
+EVAL_FLAG_PREFIXES = ("--policy.", "--env.", "--eval.")  # lerobot-eval flags passed on to every run
 
 
 def num_subtasks(task: str) -> int:
@@ -118,7 +121,7 @@ def merged_table(json_files: list[Path]) -> str:
     return table(results, labels)
 
 
-def main(argv: list[str] | None = None) -> None:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
         "--merge", nargs="+", type=Path, help="print one table from these result JSON files and exit"
@@ -142,9 +145,32 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--workdir", type=Path, default=Path("outputs/talos_suite"))
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/talos_kitchen_suite"))
     ap.add_argument(
-        "--extra", nargs="*", default=[], help="more lerobot-eval flags, e.g. --policy.n_action_steps=10"
+        "--extra",
+        action="append",
+        default=[],
+        help="one more lerobot-eval flag (repeatable), e.g. --extra=--policy.n_action_steps=10; "
+        "--policy.* / --env.* / --eval.* flags given directly are passed on too",
     )
-    args = ap.parse_args(argv)
+    return ap
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """This script's flags; lerobot-eval's own (``--policy.n_action_steps=20``) go on to every run."""
+    ap = build_parser()
+    args, unknown = ap.parse_known_args(argv)
+    passed_on = [a for a in unknown if a.startswith(EVAL_FLAG_PREFIXES)]
+    rest = [a for a in unknown if a not in passed_on]
+    if rest:
+        ap.error(
+            f"unrecognized arguments: {' '.join(rest)} (lerobot-eval flags start with {EVAL_FLAG_PREFIXES})"
+        )
+    args.extra = [*args.extra, *passed_on]
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = build_parser()
+    args = parse_args(argv)
     if args.merge:
         print(merged_table(args.merge))
         return

@@ -245,3 +245,28 @@ def test_suite_evaluates_state_policies_without_a_camera(tmp_path):
         (tmp_path / name / "config.json").write_text(json.dumps({"input_features": feats}))
         cmd = suite.eval_command(str(tmp_path / name), "open_door", 2, 64, 500, tmp_path / "out", [])
         assert ("--env.obs_type=state" in cmd) is expected, cmd
+
+
+def test_suite_passes_lerobot_eval_flags_on_and_names_unknown_ones():
+    """`talos_kitchen_suite.py ... --policy.n_action_steps=20` reaches every lerobot-eval run; a typo is named."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "talos_kitchen_suite.py"
+    spec = importlib.util.spec_from_file_location("talos_kitchen_suite", path)
+    suite = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(suite)
+    args = suite.parse_args(
+        [
+            "--policy",
+            "ac=ckpt",
+            "--tasks",
+            "open_door",
+            "--policy.n_action_steps=20",
+            "--extra=--env.image_size=32",
+        ]
+    )
+    assert args.policy == ["ac=ckpt"] and args.tasks == ["open_door"]
+    assert args.extra == ["--env.image_size=32", "--policy.n_action_steps=20"]
+    with pytest.raises(SystemExit):
+        suite.parse_args(["--policy", "ac=ckpt", "--n_action_steps=20"])
