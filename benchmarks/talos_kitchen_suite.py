@@ -154,15 +154,17 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+def parse_args(
+    argv: list[str] | None = None, ap: argparse.ArgumentParser | None = None
+) -> argparse.Namespace:
     """This script's flags; lerobot-eval's own (``--policy.n_action_steps=20``) go on to every run."""
-    ap = build_parser()
+    ap = ap or build_parser()
     args, unknown = ap.parse_known_args(argv)
     passed_on = [a for a in unknown if a.startswith(EVAL_FLAG_PREFIXES)]
     rest = [a for a in unknown if a not in passed_on]
     if rest:
         ap.error(
-            f"unrecognized arguments: {' '.join(rest)} (lerobot-eval flags start with {EVAL_FLAG_PREFIXES})"
+            f"unrecognized arguments: {' '.join(rest)} (lerobot-eval flags start with {EVAL_FLAG_PREFIXES}, written --flag=value)"
         )
     args.extra = [*args.extra, *passed_on]
     return args
@@ -170,7 +172,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> None:
     ap = build_parser()
-    args = parse_args(argv)
+    args = parse_args(argv, ap)
     if args.merge:
         print(merged_table(args.merge))
         return
