@@ -119,7 +119,7 @@ PLANAR_DATASETS = ("expert", "full", "partitioned")
 PLANAR_FRAMES = {"expert": 46_793, "full": 36_661, "partitioned": 29_087}
 # Recorder options pinned per dataset: the committed partitioned cells were run on play recorded before wall
 # slides became the default (PLAY_WALL_SLIDES; measured on full play only so far).
-PLANAR_OPTIONS = {"partitioned": ["wall_slides=0"]}
+PLANAR_OPTIONS = {"partitioned": ["wall_slides=0", "open_stops=0"]}
 OGBENCH_DATASETS = tuple(OGBENCH_PAPER)
 
 SUITES: dict[str, Suite] = {

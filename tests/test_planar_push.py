@@ -180,7 +180,8 @@ def test_demonstrators_valid_actions(env, behaviour):
     if behaviour == "hand":  # the hand goes around the disc, never pushes it
         assert disc_moved < 1e-3 and np.ptp(states[:, :2], axis=0).max() > 0.2
     elif behaviour != "expert":
-        assert disc_moved > 0.1  # play moves the disc
+        disc_path = np.linalg.norm(np.diff(states[:, 2:], axis=0), axis=1).sum()
+        assert disc_path > 0.3  # play moves the disc (maybe back near its start: an open-space stop)
     assert disc_coverage(states) > 0.0
 
 
@@ -303,6 +304,48 @@ def test_expert_overshoots_open_space_goals_and_pushes_the_disc_back(env):
         ExpertReachGoal(env, np.random.default_rng(0), overshoot_share=1.5)
 
 
+def test_full_play_brakes_the_disc_in_open_space_past_its_target_and_back(env):
+    """With open_stops / open_overshoot, free-space disc legs of full play brake the disc past their target,
+    then push it back onto it: the open-space goal states and the way back to them."""
+    stops, pauses = [], []
+
+    class LoggedStops(PlayFullSpace):
+        def _open_stop(self, target):
+            stops.append((self._frame - 1, target.copy()))  # frame index of the state it was planned on
+            return super()._open_stop(target)
+
+        def act(self, obs):
+            action = super().act(obs)
+            if self._queue[0].kind == "pause" and (not pauses or pauses[-1][1] != id(self._queue[0])):
+                pauses.append((self._frame - 1, id(self._queue[0])))
+            return action
+
+    shares = dict(corner_episodes=0.0, pause_share=0.0, effector_share=0.0)
+    op = LoggedStops(env, np.random.default_rng(0), open_stops=1.0, open_overshoot=1.0, **shares)
+    stopped = past_and_back = 0
+    for _ in range(3):
+        stops.clear(), pauses.clear()
+        states = run_episode(env, op, 800)[0]
+        for start, target in stops:
+            rest = next((f for f, _ in pauses if f > start), None)
+            leg = states[start:rest]
+            d = np.linalg.norm(leg[:, 2:] - target, axis=1)
+            if (
+                rest is None or d[-1] > 0.04
+            ):  # a leg dropped (the disc wedged against a wall) or cut by the end
+                continue
+            stopped += 1
+            near = int(np.argmax(d < 0.3))
+            farthest = near + int(np.argmax((leg[near:, 2:] - target) @ (target - leg[near, 2:]) / d[near]))
+            past_and_back += _farthest_past_goal(leg, target) > 0.06 and d[farthest:].min() < 0.03
+    assert stopped >= 5 and past_and_back >= 2, (stopped, past_and_back)
+    stops.clear()
+    run_episode(env, LoggedStops(env, np.random.default_rng(0), open_stops=0.0, **shares), 800)
+    assert not stops  # the disc only coasts near free-space targets
+    with pytest.raises(ValueError, match="open_overshoot"):
+        PlayFullSpace(env, np.random.default_rng(0), open_overshoot=1.5)
+
+
 def test_play_pauses_hold_still(env):
     """Play pauses last 20-100 frames and follow half of the disc legs: disc and hand stay put meanwhile."""
     op = PlayFullSpace(env, np.random.default_rng(0))
@@ -336,7 +379,9 @@ def test_play_ends_in_a_corner_and_never_stalls(env):
     """No push gets a disc out of a corner (no room behind it): play that wedges one there rests and ends the
     episode (before, 30 % of the full-play frames flailed around a wedged disc). A leg in which nothing moves is
     dropped instead of pressing the hand into a wall (3.6 % of the frames before)."""
-    op = PlayFullSpace(env, np.random.default_rng(0))
+    op = PlayFullSpace(
+        env, np.random.default_rng(0), open_stops=0.0
+    )  # the random stream these counts hold on
     in_corner_at_end = 0
     for _ in range(6):
         states, actions, _, done = run_episode(env, op, 800)
@@ -357,7 +402,11 @@ def test_play_pushes_the_disc_into_corners(cls, length):
     no play frame is within the success tolerance of those goals."""
     env = PlanarPushEnv(task="all")  # its own: the solver's warm start makes rollouts depend on earlier tests
     rng = np.random.default_rng(1)
-    ops = [cls(env, rng, region=r) for r in range(3)] if cls is PlayPartitioned else [cls(env, rng)] * 3
+    ops = (
+        [cls(env, rng, region=r) for r in range(3)]
+        if cls is PlayPartitioned
+        else [cls(env, rng, open_stops=0)] * 3
+    )
     states = np.concatenate([run_episode(env, op, length)[0] for op in ops])  # partitioned: each region once
     env.close()
     goals = np.array([g[2:] for _, _, g in EVAL_PAIRS])

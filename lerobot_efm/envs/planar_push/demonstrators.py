@@ -137,6 +137,13 @@ OPEN_GOAL_HAND = 0.36  # an open-space goal's hand lies at most this far from it
 EXPERT_OVERSHOOT_SHARE = 0.5
 OVERSHOOT = (0.06, 0.15)  # how far past the goal such a push brakes the disc
 OVERSHOOT_ARM = 0.3  # decided once the disc is this close to its goal, along the direction it comes from
+# Full play had the expert's defect: its free-space disc legs pushed the disc to within 0.08 of a target without
+# braking, so the disc coasted to a stop wherever it did, and never past a spot and back. FM-AC no-RL on it
+# (24k steps) reached every corner pair at 60-100 % but neither open-space pair (0 %). A share PLAY_OPEN_STOPS of
+# the free-space legs now brakes the disc on its target as the expert does (PLAY_OPEN_OVERSHOOT of them past it
+# first, then back from the other side), moves the hand beside the resting disc and pauses there.
+PLAY_OPEN_STOPS = 0.5
+PLAY_OPEN_OVERSHOOT = 0.5
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -480,6 +487,7 @@ class Leg:
     slide: bool = False
     direction: np.ndarray | None = None
     last: bool = False  # the episode ends with this leg
+    overshoot: float = 0.0  # a "disc_stop" first brakes the disc this far past ``target`` (see OVERSHOOT_ARM)
 
 
 class PlayFullSpace:
@@ -505,6 +513,8 @@ class PlayFullSpace:
         corner_after: int = PLAY_CORNER_AFTER,
         corner_episodes: float = PLAY_CORNER_EPISODES,
         wall_slides: float = PLAY_WALL_SLIDES,
+        open_stops: float = PLAY_OPEN_STOPS,
+        open_overshoot: float = PLAY_OPEN_OVERSHOOT,
         **_,
     ):
         self.env, self.rng, self.noise, self.leg_budget = env, rng, float(noise), int(leg_budget)
@@ -521,6 +531,10 @@ class PlayFullSpace:
         if not 0.0 <= wall_slides <= 1.0:
             raise ValueError(f"wall_slides must be in [0, 1], got {wall_slides!r}")
         self.wall_slides = float(wall_slides)
+        for name, share in (("open_stops", open_stops), ("open_overshoot", open_overshoot)):
+            if not 0.0 <= share <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {share!r}")
+        self.open_stops, self.open_overshoot = float(open_stops), float(open_overshoot)
         self._frame, self._done, self._closing_frame = 0, False, None
         self._last_state, self._stalled = np.zeros(4), 0
         self.pusher = Pusher(self.region, lookahead=self.push_lookahead)
@@ -576,11 +590,22 @@ class PlayFullSpace:
             if self.rng.random() < self.rest_after_disc:
                 self._queue.append(self._pause())
         else:
-            self._queue = [Leg("disc", self.pusher.sample_disc(self.rng))]
+            target = self.pusher.sample_disc(self.rng)
+            if self.open_stops > 0 and self.rng.random() < self.open_stops:  # (0: the old random stream)
+                self._queue = self._open_stop(target)
+                return
+            self._queue = [Leg("disc", target)]
             if self.rng.random() < 0.3:  # detour through another point first
                 self._queue.insert(0, Leg("disc", self.pusher.sample_disc(self.rng)))
             if self.rng.random() < self.rest_after_disc:  # a human often lets go once the disc is there
                 self._queue.append(self._pause())
+
+    def _open_stop(self, target: np.ndarray) -> list[Leg]:
+        """Brake the disc on a free-space ``target`` (sometimes past it first), hand beside it, rest: the
+        open-space goal states and the way back to them, as the expert shows them."""
+        overshoot = self.rng.uniform(*OVERSHOOT) if self.rng.random() < self.open_overshoot else 0.0
+        hand = self.pusher.sample_effector(self.rng, target, near=OPEN_GOAL_HAND)
+        return [Leg("disc_stop", target, overshoot=overshoot), Leg("effector", hand), self._pause()]
 
     def _pause(self, last: bool = False) -> Leg:
         """A rest of human-like length; the hand holds where it is when the pause starts."""
@@ -612,6 +637,13 @@ class PlayFullSpace:
                 if leg.target is None:
                     leg.target = eff.copy()
                 return _clip(leg.target + self.rng.normal(0.0, REST_NOISE, 2))  # a resting hand: no leg noise
+            if leg.overshoot > 0 and np.linalg.norm(obj - leg.target) < OVERSHOOT_ARM:
+                past = leg.target + _unit(leg.target - obj) * leg.overshoot
+                leg.overshoot = 0.0
+                if self.pusher.disc_fits(past):  # never past the target into a wall (or out of the region)
+                    self._queue.insert(0, Leg("disc_stop", past))
+                    self._budget = self.leg_budget
+                continue
             reach_tol = {"disc": 0.08, "disc_via": VIA_TOL, "disc_stop": 0.025}.get(leg.kind)
             reached = np.linalg.norm((obj if reach_tol else eff) - leg.target) < (reach_tol or 0.04)
             if reached or self._budget <= 0:
