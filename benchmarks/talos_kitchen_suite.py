@@ -27,6 +27,9 @@ BIN = Path(sys.executable).parent
 EVAL_FLAG_PREFIXES = ("--policy.", "--env.", "--eval.")  # lerobot-eval flags passed on to every run
 
 
+SECONDS_FILE = "seconds.txt"  # next to a cell's eval_info.json: how long its lerobot-eval ran
+
+
 def num_subtasks(task: str) -> int:
     """Objects whose state differs between the task's initial and goal state (door, tray, pot)."""
     a, b = TASKS[task].initial, TASKS[task].goal
@@ -70,8 +73,8 @@ def run_one(label: str, checkpoint: str, task: str, args, root: Path) -> dict:
     cmd = eval_command(
         checkpoint, task, args.episodes, args.image_size, args.steps_per_subtask, out, args.extra
     )
-    t0 = time.perf_counter()
     if not (out / "eval_info.json").exists():  # resumable: a finished (label, task) is not re-run
+        t0 = time.perf_counter()
         env = {
             **os.environ,
             "HF_HUB_OFFLINE": "1",
@@ -81,10 +84,13 @@ def run_one(label: str, checkpoint: str, task: str, args, root: Path) -> dict:
         proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if proc.returncode:
             raise RuntimeError(f"lerobot-eval failed for {label}/{task}:\n{proc.stderr[-3000:]}")
-    seconds = time.perf_counter() - t0
+        (out / SECONDS_FILE).write_text(f"{time.perf_counter() - t0:.1f}\n")
+    # the cell's own evaluation time, also when an earlier run did it (None: run before this file existed)
+    seconds = float((out / SECONDS_FILE).read_text()) if (out / SECONDS_FILE).exists() else None
     info = json.loads((out / "eval_info.json").read_text())
     successes = [bool(x) for t in info.get("per_task", []) for x in t["metrics"]["successes"]]
-    print(f"{label:>8} {task:<22} {info['overall']['pc_success']:5.1f}% ({seconds:.0f} s)", flush=True)
+    took = "time not recorded" if seconds is None else f"{seconds:.0f} s"
+    print(f"{label:>8} {task:<22} {info['overall']['pc_success']:5.1f}% ({took})", flush=True)
     return {
         "label": label,
         "task": task,
@@ -106,7 +112,8 @@ def table(results: list[dict], labels: list[str]) -> str:
     means = []
     for lab in labels:
         vals = [by[(lab, t)]["pc_success"] for t in TASK_NAMES if (lab, t) in by]
-        means.append(f"{sum(vals) / max(1, len(vals)):.0f}%")
+        subset = f" ({len(vals)} tasks)" if len(vals) < len(TASK_NAMES) else ""  # not the suite's mean
+        means.append(f"{sum(vals) / max(1, len(vals)):.0f}%{subset}")
     lines.append("| **mean** | | " + " | ".join(means) + " |")
     return "\n".join(lines)
 
@@ -199,11 +206,14 @@ def main(argv: list[str] | None = None) -> None:
         )
     )
     md = table(results, labels)
+    recorded = [r["seconds"] for r in results if r["seconds"] is not None]
     args.out.with_suffix(".md").write_text(
         f"# Talos kitchen suite: success per task ({args.episodes} episodes per task, lerobot-eval)\n\n{md}\n\n"
         f"Episode limit: {args.steps_per_subtask} control steps (20 s) per object to move (door, tray, pot), "
         "e.g. 500 for open_door, 1500 for store_pot. "
-        f"Wall time {minutes:.0f} min with {args.jobs} parallel lerobot-eval runs. Checkpoints: "
+        f"Evaluation time {sum(recorded) / 60:.0f} min summed over {len(recorded)} of {len(results)} cells "
+        f"(each cell's lerobot-eval, 1 thread); this run's wall time {minutes:.0f} min with {args.jobs} "
+        "parallel runs. Checkpoints: "
         + ", ".join(f"`{k}` = `{v}`" for k, v in policies.items())
         + ".\n\nCommand of one cell:\n\n```\n"
         + results[0]["command"]

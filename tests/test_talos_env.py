@@ -270,3 +270,36 @@ def test_suite_passes_lerobot_eval_flags_on_and_names_unknown_ones():
     assert args.extra == ["--env.image_size=32", "--policy.n_action_steps=20"]
     with pytest.raises(SystemExit):
         suite.parse_args(["--policy", "ac=ckpt", "--n_action_steps=20"])
+
+
+def test_suite_keeps_each_cells_time_and_names_a_partial_mean(tmp_path):
+    """A cell evaluated by an earlier run reports the time its lerobot-eval took (``seconds.txt``), not the
+    0 s of gathering it; a mean over part of the 13 tasks says how many it covers."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "talos_kitchen_suite.py"
+    spec = importlib.util.spec_from_file_location("talos_kitchen_suite", path)
+    suite = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(suite)
+    ckpt = tmp_path / "ckpt"
+    ckpt.mkdir()
+    (ckpt / "config.json").write_text(
+        json.dumps({"input_features": {"observation.state": {"type": "STATE"}}})
+    )
+    args = suite.parse_args(["--policy", f"ac={ckpt}", "--tasks", "open_door", "store_pot"])
+    results = []
+    for task, successes in (("open_door", [1, 1]), ("store_pot", [0, 1])):
+        cell = tmp_path / "ac" / task
+        cell.mkdir(parents=True)
+        info = {
+            "per_task": [{"metrics": {"successes": successes}}],
+            "overall": {"pc_success": 50.0 * sum(successes), "n_episodes": 2},
+        }
+        (cell / "eval_info.json").write_text(json.dumps(info))
+        results.append(suite.run_one("ac", str(ckpt), task, args, tmp_path))
+    (tmp_path / "ac" / "open_door" / suite.SECONDS_FILE).write_text("754.2\n")
+    assert suite.run_one("ac", str(ckpt), "open_door", args, tmp_path)["seconds"] == 754.2
+    assert results[1]["seconds"] is None  # evaluated before cells kept their time: unknown, not 0
+    assert "| **mean** | | 75% (2 tasks) |" in suite.table(results, ["ac"])
