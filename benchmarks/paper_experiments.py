@@ -118,8 +118,8 @@ PLANAR_DATASETS = ("expert", "full", "partitioned")
 # Paper dataset sizes (frames of mouse teleoperation at 20 Hz): reach_goal / play_full / play_stitch.
 PLANAR_FRAMES = {"expert": 46_793, "full": 36_661, "partitioned": 29_087}
 # Recorder options pinned per dataset: the committed partitioned cells were run on play recorded before wall
-# slides became the default (PLAY_WALL_SLIDES; measured on full play only so far).
-PLANAR_OPTIONS = {"partitioned": ["wall_slides=0", "open_stops=0"]}
+# slides, open-space stops and balanced corners became the defaults (measured on full play only so far).
+PLANAR_OPTIONS = {"partitioned": ["wall_slides=0", "open_stops=0", "balanced_corners=false"]}
 OGBENCH_DATASETS = tuple(OGBENCH_PAPER)
 
 SUITES: dict[str, Suite] = {

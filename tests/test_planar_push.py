@@ -346,6 +346,22 @@ def test_full_play_brakes_the_disc_in_open_space_past_its_target_and_back(env):
         PlayFullSpace(env, np.random.default_rng(0), open_overshoot=1.5)
 
 
+def test_full_play_ends_its_episodes_in_every_corner_alike():
+    """balanced_corners: each episode heads for the corner ended in least often so far (a failed corner leg is
+    tried again), so a recording covers the four corner goals alike instead of as the dice fell (with
+    balanced_corners=False these 8 episodes end in the corners 1 / 1 / 2 / 0 times)."""
+    env = PlanarPushEnv(task="all")  # its own: the solver's warm start makes rollouts depend on earlier tests
+    op = PlayFullSpace(env, np.random.default_rng(0), corner_episodes=1.0, corner_after=60)
+    ends = np.zeros(len(CORNERS), int)
+    for _ in range(8):
+        last = run_episode(env, op, 800)[0][-1, 2:]
+        d = np.linalg.norm(CORNERS - last, axis=1)
+        ends[d.argmin()] += d.min() < 0.05
+    env.close()
+    assert ends.sum() >= 6 and ends.min() >= 1 and ends.max() - ends.min() <= 1, ends
+    assert sorted(op._corner_endings.values()) == sorted(ends[ends > 0].tolist())
+
+
 def test_play_pauses_hold_still(env):
     """Play pauses last 20-100 frames and follow half of the disc legs: disc and hand stay put meanwhile."""
     op = PlayFullSpace(env, np.random.default_rng(0))
