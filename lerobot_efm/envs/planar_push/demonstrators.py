@@ -139,7 +139,7 @@ OVERSHOOT = (0.06, 0.15)  # how far past the goal such a push brakes the disc
 OVERSHOOT_ARM = 0.3  # decided once the disc is this close to its goal, along the direction it comes from
 # Full play had the expert's defect: its free-space disc legs pushed the disc to within 0.08 of a target without
 # braking, so the disc coasted to a stop wherever it did, and never past a spot and back. FM-AC no-RL on it
-# (24k steps) reached every corner pair at 60-100 % but neither open-space pair (0 %). A share PLAY_OPEN_STOPS of
+# (24k steps) reached seven pairs at 60-100 % but neither open-space pair (0 %). A share PLAY_OPEN_STOPS of
 # the free-space legs now brakes the disc on its target as the expert does (PLAY_OPEN_OVERSHOOT of them past it
 # first, then back from the other side), moves the hand beside the resting disc and pauses there.
 PLAY_OPEN_STOPS = 0.5
