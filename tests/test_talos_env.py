@@ -226,17 +226,24 @@ def test_state_obs_type_renders_nothing_and_observes_the_same_states():
         TalosKitchenEnvConfig(task="open_door", obs_type="depth")
 
 
-def test_suite_evaluates_state_policies_without_a_camera(tmp_path):
-    """benchmarks/talos_kitchen_suite.py asks lerobot-eval for the state-only env exactly when the checkpoint's
-    policy reads no camera (an image policy evaluated without one would fail on a missing key)."""
+def _suite_module():
+    """benchmarks/talos_kitchen_suite.py, imported from its path (benchmarks/ is not a package)."""
     import importlib.util
-    import json
     from pathlib import Path
 
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "talos_kitchen_suite.py"
     spec = importlib.util.spec_from_file_location("talos_kitchen_suite", path)
     suite = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(suite)
+    return suite
+
+
+def test_suite_evaluates_state_policies_without_a_camera(tmp_path):
+    """benchmarks/talos_kitchen_suite.py asks lerobot-eval for the state-only env exactly when the checkpoint's
+    policy reads no camera (an image policy evaluated without one would fail on a missing key)."""
+    import json
+
+    suite = _suite_module()
     for name, feats, expected in (
         ("state", {"observation.state": {"type": "STATE", "shape": [20]}}, True),
         ("image", {"observation.images.front": {"type": "VISUAL", "shape": [3, 64, 64]}}, False),
@@ -249,13 +256,8 @@ def test_suite_evaluates_state_policies_without_a_camera(tmp_path):
 
 def test_suite_passes_lerobot_eval_flags_on_and_names_unknown_ones():
     """`talos_kitchen_suite.py ... --policy.n_action_steps=20` reaches every lerobot-eval run; a typo is named."""
-    import importlib.util
-    from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "talos_kitchen_suite.py"
-    spec = importlib.util.spec_from_file_location("talos_kitchen_suite", path)
-    suite = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(suite)
+    suite = _suite_module()
     args = suite.parse_args(
         [
             "--policy",
@@ -275,14 +277,9 @@ def test_suite_passes_lerobot_eval_flags_on_and_names_unknown_ones():
 def test_suite_keeps_each_cells_time_and_names_a_partial_mean(tmp_path):
     """A cell evaluated by an earlier run reports the time its lerobot-eval took (``seconds.txt``), not the
     0 s of gathering it; a mean over part of the 13 tasks says how many it covers."""
-    import importlib.util
     import json
-    from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "talos_kitchen_suite.py"
-    spec = importlib.util.spec_from_file_location("talos_kitchen_suite", path)
-    suite = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(suite)
+    suite = _suite_module()
     ckpt = tmp_path / "ckpt"
     ckpt.mkdir()
     (ckpt / "config.json").write_text(
