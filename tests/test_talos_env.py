@@ -256,7 +256,6 @@ def test_suite_evaluates_state_policies_without_a_camera(tmp_path):
 
 def test_suite_passes_lerobot_eval_flags_on_and_names_unknown_ones():
     """`talos_kitchen_suite.py ... --policy.n_action_steps=20` reaches every lerobot-eval run; a typo is named."""
-
     suite = _suite_module()
     args = suite.parse_args(
         [
