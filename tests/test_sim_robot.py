@@ -149,7 +149,7 @@ def _goal_frame_clear_of_the_disc(states: np.ndarray) -> int:
 @pytest.mark.realtime
 def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
     """The deployment workflow a user follows, checked on the simulator's state: record hand-only play with
-    lerobot-record, train efm_gc (600 steps) with lerobot-train, export a frame as the goal with lerobot-efm-goal, and let
+    lerobot-record, train efm_gc (1500 steps) with lerobot-train, export a frame as the goal with lerobot-efm-goal, and let
     lerobot-rollout (episodic: it records what the robot does) drive the hand there, the disc untouched."""
     from safetensors.torch import load_file
 
@@ -198,8 +198,8 @@ def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
         "--num_workers=0",
         "--batch_size=64",
         "--log_freq=500",
-        "--steps=600",
-        "--save_freq=600",
+        "--steps=1500",
+        "--save_freq=1500",
         timeout=600,
     )
     frame = _goal_frame_clear_of_the_disc(states)
