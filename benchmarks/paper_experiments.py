@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as cf
+import fcntl
 import importlib
 import json
 import os
@@ -271,15 +272,22 @@ def ensure_dataset(
 
     A cached dataset reports the command and time saved next to it when it was generated (else None, 0)."""
     root = dataset_root(data_root, suite, dataset, spec)
-    if (root / "meta" / "info.json").exists():
-        return (root, *dataset_provenance(root))
-    shutil.rmtree(root, ignore_errors=True)  # a half-written dataset from an interrupted run
-    shutil.rmtree(Path(f"{root}-npz"), ignore_errors=True)
-    cmd = generate_command(suite, dataset, root, spec)
-    print(f"generating {suite}/{dataset}: {shell(cmd)}", flush=True)
-    wall = run_logged(cmd, data_root / suite / f"{root.name}.log")
-    provenance_path(root).write_text(json.dumps({"command": shell(cmd), "seconds": round(wall, 1)}, indent=2))
-    return root, shell(cmd), wall
+    root.parent.mkdir(parents=True, exist_ok=True)
+    # Two runner processes sharing a data root (two 1-thread jobs side by side) must not both generate it: the
+    # second would delete the first's half-written recording. The lock makes the second wait, then reuse it.
+    with open(root.with_name(f"{root.name}.lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if (root / "meta" / "info.json").exists():
+            return (root, *dataset_provenance(root))
+        shutil.rmtree(root, ignore_errors=True)  # a half-written dataset from an interrupted run
+        shutil.rmtree(Path(f"{root}-npz"), ignore_errors=True)
+        cmd = generate_command(suite, dataset, root, spec)
+        print(f"generating {suite}/{dataset}: {shell(cmd)}", flush=True)
+        wall = run_logged(cmd, data_root / suite / f"{root.name}.log")
+        provenance_path(root).write_text(
+            json.dumps({"command": shell(cmd), "seconds": round(wall, 1)}, indent=2)
+        )
+        return root, shell(cmd), wall
 
 
 def provenance_path(root: Path) -> Path:

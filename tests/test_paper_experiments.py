@@ -2,6 +2,7 @@
 hyper-parameter configs, and a tiny real run (generated OGBench data, lerobot-train, lerobot-eval, resume)."""
 
 import argparse
+import concurrent.futures as cf
 import importlib.util
 import json
 import shutil
@@ -412,3 +413,29 @@ def test_seed_means_groups_seeds_of_one_setting(tmp_path):
     assert "| 60 | 60.0 |" in table
     with pytest.raises(ValueError, match="seed 1000 .* in two reports"):
         means.main([*reports, reports[1]])
+
+
+def test_two_runners_sharing_a_data_root_generate_it_once(tmp_path, monkeypatch):
+    """Two runner processes started side by side (one thread each) on one --data-root: the second waits for the
+    first's recording and reuses it, instead of deleting it half-written and recording its own."""
+    generations = tmp_path / "generations.txt"
+
+    def slow_generator(
+        suite, dataset, root, spec
+    ):  # a recorder that takes a while, then writes meta/info.json
+        script = (
+            "import pathlib, sys, time; time.sleep(1.0); r = pathlib.Path(sys.argv[1]);"
+            "(r / 'meta').mkdir(parents=True); (r / 'meta' / 'info.json').write_text('{}');"
+            "open(sys.argv[2], 'a').write('once\\n')"
+        )
+        return [sys.executable, "-c", script, str(root), str(generations)]
+
+    monkeypatch.setattr(pe, "generate_command", slow_generator)
+    spec = pe.DataSpec(None, None, 100)
+    with cf.ThreadPoolExecutor(2) as pool:
+        results = list(
+            pool.map(lambda _: pe.ensure_dataset("planar_push", "expert", tmp_path / "data", spec), range(2))
+        )
+    assert generations.read_text() == "once\n"
+    assert results[0][0] == results[1][0] and (results[0][0] / "meta" / "info.json").exists()
+    assert sorted(r[2] > 0 for r in results) == [True, True]  # both name the generating run and its time
