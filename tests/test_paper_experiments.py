@@ -420,9 +420,8 @@ def test_two_runners_sharing_a_data_root_generate_it_once(tmp_path, monkeypatch)
     first's recording and reuses it, instead of deleting it half-written and recording its own."""
     generations = tmp_path / "generations.txt"
 
-    def slow_generator(
-        suite, dataset, root, spec
-    ):  # a recorder that takes a while, then writes meta/info.json
+    # a recorder that takes a while, then writes meta/info.json
+    def slow_generator(suite, dataset, root, spec):
         script = (
             "import pathlib, sys, time; time.sleep(1.0); r = pathlib.Path(sys.argv[1]);"
             "(r / 'meta').mkdir(parents=True); (r / 'meta' / 'info.json').write_text('{}');"
