@@ -52,6 +52,19 @@ def load_cells(reports: list[Path], require_curve: bool = True) -> list[dict]:
     return cells
 
 
+def select(cells: list[dict], datasets: list[str] | None, variants: list[str] | None) -> list[dict]:
+    """The cells of these datasets and runner variants (``ac``, ``pc_rl``, ...; None: all), so that one plot can
+    set two configs' runs of a few cells side by side out of reports that hold many."""
+    kept = [
+        c
+        for c in cells
+        if (not datasets or c["dataset"] in datasets) and (not variants or c.get("variant") in variants)
+    ]
+    if not kept:
+        raise ValueError(f"No cell of datasets {datasets} and variants {variants} in the reports")
+    return kept
+
+
 def label(cell: dict, several_settings: bool) -> str:
     text = f"{cell['agent']} (seed {cell['seed']})"
     return f"{text} [{cell['setting']}]" if several_settings else text
@@ -113,8 +126,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("reports", nargs="+", type=Path, help="JSON reports of benchmarks/paper_experiments.py")
     ap.add_argument("--out", type=Path, required=True, help="PNG file")
     ap.add_argument("--title", default="planar push")
+    ap.add_argument("--datasets", nargs="*", default=None, help="keep only these datasets")
+    ap.add_argument(
+        "--variants", nargs="*", default=None, help="keep only these runner variants (ac, pc_rl, ...)"
+    )
     args = ap.parse_args(argv)
-    plot(load_cells(args.reports), args.out, args.title)
+    plot(select(load_cells(args.reports), args.datasets, args.variants), args.out, args.title)
     print(f"wrote {args.out}")
 
 

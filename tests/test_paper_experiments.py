@@ -371,6 +371,14 @@ def test_plot_learning_curves_draws_cells_with_curves(tmp_path):
         == "FM-AC no-RL (seed 3) [x_cpu state_encoder=fourier 24k steps]"
     )
     plot.main([str(report), str(fourier), "--out", str(tmp_path / "both.png")])
+    # --datasets / --variants pick cells out of wide reports; a filter that keeps nothing says which
+    both[0]["variant"], both[1]["variant"] = "ac", "pc_rl"
+    assert plot.select(both, ["expert"], ["ac"]) == [both[0]] and plot.select(both, None, ["pc_rl"]) == [
+        both[1]
+    ]
+    assert plot.select(both, ["expert"], None) == both == plot.select(both, None, None)
+    with pytest.raises(ValueError, match=r"\['full'\] and variants \['ac'\]"):
+        plot.select(both, ["full"], ["ac"])
     report.write_text(json.dumps({"cells": [{"agent": "FM-GC", "dataset": "full"}]}))
     with pytest.raises(ValueError, match="--curve-points"):
         plot.load_cells([report])
