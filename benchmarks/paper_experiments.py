@@ -21,7 +21,8 @@ updates), and LeRobot's cosine schedule scales its warm-up/decay down to a short
 longer than the config's ``scheduler_decay_steps`` stretches the decay to it.
 
 Resumable: a cell whose ``result.json`` exists under ``--work-dir`` is not re-run; a finished training whose
-evaluation is missing is only re-evaluated. Datasets are generated once under ``--data-root``. Cells of
+evaluation is missing is only re-evaluated; an interrupted training resumes from its last checkpoint
+(``lerobot-train --resume=true``), its time summed over the segments (``train_segments.json``). Datasets are generated once under ``--data-root``. Cells of
 several invocations (or machines) meet in one report through ``--cached-only`` and ``--import-report`` (the
 committed JSON of an earlier report with the same budget).
 
@@ -38,6 +39,7 @@ import importlib
 import json
 import os
 import platform
+import re
 import shlex
 import shutil
 import subprocess
@@ -463,12 +465,10 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
     checkpoint = train_dir / CHECKPOINT
     tcmd = train_command(suite, variant, data, dataset_repo_id(suite.name, dataset), train_dir, budget)
     train_time = cell_dir / "train_seconds.txt"  # kept for re-evaluations of a finished training
-    if not (checkpoint / "model.safetensors").exists():
-        shutil.rmtree(
-            train_dir, ignore_errors=True
-        )  # an interrupted training: lerobot-train refuses to overwrite
-        print(f"[{suite.name}/{dataset}/{variant}] training: {shell(tcmd)}", flush=True)
-        train_time.write_text(f"{run_logged(tcmd, cell_dir / 'train.log'):.1f}\n")
+    if not train_time.exists():
+        seconds = train_or_resume(tcmd, train_dir, cell_dir, budget, suite, dataset, variant)
+        if seconds is not None:
+            train_time.write_text(f"{seconds:.1f}\n")
     train_s = float(train_time.read_text()) if train_time.exists() else None
     curve = []
     for k in range(1, budget.curve_points):  # intermediate checkpoints, each evaluated once (resumable)
@@ -522,6 +522,67 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
         flush=True,
     )
     return result
+
+
+def train_or_resume(
+    tcmd: list[str], train_dir: Path, cell_dir: Path, budget: Budget, suite: Suite, dataset: str, variant: str
+) -> float | None:
+    """Train the cell, or resume an interrupted training from its last checkpoint; returns the training seconds
+    of all segments (None: a finished training of unknown duration). LeRobot resumes sample-exactly (weights, EMA, optimiser, schedule, RNG, data order); the
+    seconds of an interrupted segment up to its checkpoint are read from its progress bar."""
+    name = f"{suite.name}/{dataset}/{variant}"
+    saved = saved_step(train_dir)
+    if saved is None:
+        shutil.rmtree(train_dir, ignore_errors=True)  # nothing saved yet: lerobot-train refuses to overwrite
+        print(f"[{name}] training: {shell(tcmd)}", flush=True)
+        return run_logged(tcmd, cell_dir / "train.log")
+    segments_path = cell_dir / "train_segments.json"
+    segments = json.loads(segments_path.read_text()) if segments_path.exists() else []
+    if saved < budget.steps:
+        log = cell_dir / "train.log"
+        start = segments[-1]["to_step"] if segments else 0
+        seconds = progress_bar_seconds(log, budget.steps, saved)
+        segments.append({"from_step": start, "to_step": saved, "seconds": round(seconds, 1)})
+        log.rename(cell_dir / f"train_until_{saved:06d}.log")
+        segments_path.write_text(json.dumps(segments, indent=2))
+        rcmd = [
+            str(BIN / "lerobot-train"),
+            f"--config_path={train_dir / 'checkpoints' / 'last' / 'pretrained_model' / 'train_config.json'}",
+            "--resume=true",
+        ]
+        print(f"[{name}] resuming at step {saved}: {shell(rcmd)}", flush=True)
+        wall = run_logged(rcmd, log)
+        segments.append({"from_step": saved, "to_step": budget.steps, "seconds": round(wall, 1)})
+        segments_path.write_text(json.dumps(segments, indent=2))
+    return sum(s["seconds"] for s in segments) if segments else None
+
+
+def saved_step(train_dir: Path) -> int | None:
+    """Training step of the last checkpoint lerobot-train saved in ``train_dir`` (None: no checkpoint)."""
+    state = train_dir / "checkpoints" / "last" / "training_state" / "training_step.json"
+    return json.loads(state.read_text())["step"] if state.exists() else None
+
+
+def progress_bar_seconds(log: Path, total_steps: int, step: int) -> float:
+    """Wall seconds lerobot-train's progress bar shows at ``step`` (extrapolated at its rate from the last
+    refresh before it). A resumed run's bar counts ``n / (total_steps - start)`` from its own start."""
+    best = None
+    for n, total, elapsed in re.findall(r"(\d+)/(\d+) \[([\d:]+)<", log.read_text(errors="replace")):
+        at = total_steps - int(total) + int(n)
+        if int(n) > 0 and at <= step and (best is None or at > best[0]):
+            best = (at, int(n), clock_seconds(elapsed))
+    if best is None:
+        raise RuntimeError(f"{log}: no progress bar up to step {step}; cannot account its training time")
+    at, n, seconds = best
+    return seconds * (n + step - at) / n
+
+
+def clock_seconds(text: str) -> float:
+    """'1:48:04' or '05:23' (tqdm's elapsed) in seconds."""
+    seconds = 0.0
+    for part in text.split(":"):
+        seconds = seconds * 60 + int(part)
+    return seconds
 
 
 def evaluate_checkpoint(
