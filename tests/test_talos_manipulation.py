@@ -88,6 +88,26 @@ def test_pot_pick_and_place_on_table():
     assert primitives.welded(data, h) is None
 
 
+def test_off_centre_pot_grasp_holds_and_reads_a_high_closure():
+    """1.5 cm along the handle bar from its centre the grasp still carries the pot, but its closure reads like a
+    miss at the centre would (> 0.6, the centre: ~0.44): what the play operator's spread grasps show policies."""
+    model, data, h, ctrl = _setup()
+    closures = []
+    last = None
+    for command in primitives.pot_pick_place(data, h, primitives.home_command(), (0.45, -0.34), along=-0.015):
+        ctrl.step(data, command)
+        last = command
+        if primitives.welded(data, h) == "pot":
+            closures.append(scene.gripper_opening(data, h))
+    for _ in range(25):
+        ctrl.step(data, last)
+    p1, _ = scene.pot_pose(data, h)
+    assert np.linalg.norm(p1[:2] - [0.45, -0.34]) < 0.04
+    assert len(closures) > 50 and np.median(closures) > 0.6, np.median(closures)
+    with pytest.raises(ValueError, match="along=0.07"):
+        scene.pot_handle_pos(data, h, "left", 0.07)
+
+
 def test_pot_onto_pulled_out_tray():
     model, data, h, ctrl = _setup()
     last = primitives.execute(ctrl, data, primitives.tray_move(data, h, primitives.home_command(), -0.27))

@@ -30,7 +30,8 @@ wrapped in human-like imperfections:
 * speed: every sub-task is slowed by a factor U(1, 1.3) (linear interpolation between commands;
   never faster than the primitives, whose grasp waits assume physics advances);
 * pauses: p = 0.006 per command of holding 0.2-1 s mid-motion;
-* noise: temporally correlated (Ornstein-Uhlenbeck, tau 0.4 s) position noise, 3 mm per axis.
+* noise: temporally correlated (Ornstein-Uhlenbeck, tau 0.4 s) position noise, 3 mm per axis;
+* pot grasps: anywhere within +- ``pot_grasp_spread`` (2.5 cm) of the handle bar's centre, not only at it.
 
 A failed primitive (no weld, object not moved) is simply followed by a new choice from the real state.
 Commands are clipped to ``env.action_space`` (float32, finite). Everything random comes from the given
@@ -64,6 +65,9 @@ NOISE_STD = 0.003  # m per axis
 NOISE_TAU = 0.4  # s
 P_DETOUR, P_ABORT, P_PAUSE_STEP, P_PARTIAL = 0.3, 0.15, 0.006, 0.2
 STRETCH = (1.0, 1.3)
+# m: pot grasps land U(-spread, spread) along the handle bar, as a human's would, not always at its centre; held
+# grasps towards -x read closures of 0.6-1.0 (the centre: 0.44), which the policies reach and must see lifted
+POT_GRASP_SPREAD = 0.025
 MISSED_GRASP_CLOSURE = 0.9  # measured closure at which the operator sees that a grasp missed
 MISSED_GRASP_MAX_STEPS = 60  # ... or gives up waiting (2.4 s)
 MISSED_GRASP_SHORT = (0.06, 0.09)  # m short of the handle where aborted grasps stop
@@ -182,10 +186,24 @@ class TalosPlayOperator:
     """Random feasible sub-tasks with human-like imperfections (see the module docstring)."""
 
     def __init__(
-        self, env, rng: np.random.Generator, noise_std: float = NOISE_STD, weights: dict | None = None
+        self,
+        env,
+        rng: np.random.Generator,
+        noise_std: float = NOISE_STD,
+        weights: dict | None = None,
+        pot_grasp_spread: float = POT_GRASP_SPREAD,
     ):
         self.env, self.rng = env, rng
         self.noise_std = float(noise_std)
+        if not 0.0 <= pot_grasp_spread <= scene.POT_HANDLE_HALF_LENGTH - 0.02:
+            raise ValueError(
+                f"pot_grasp_spread={pot_grasp_spread} m: the grasp must stay on the handle bar, "
+                f"within 0 .. {scene.POT_HANDLE_HALF_LENGTH - 0.02:.3f} m of its centre"
+            )
+        self.pot_grasp_spread = float(pot_grasp_spread)
+        # its own stream (spawned: the parent's draws are unchanged), so the grasp points leave the sub-task
+        # sequence of a seed as it was
+        self._grasp_rng = rng.spawn(1)[0]
         self.weights = dict(WEIGHTS if weights is None else weights)
         unknown = set(self.weights) - set(WEIGHTS)
         if unknown:
@@ -432,10 +450,11 @@ class TalosPlayOperator:
 
     def _pot_plan(self, dest: np.ndarray, place_z: float):
         env = self.env
+        along = float(self._grasp_rng.uniform(-self.pot_grasp_spread, self.pot_grasp_spread))
         yield from self._prelude(
-            scene.pot_handle_pos(env.data, env.h, "left"), P.rot_down(0.0), [0.0, 0.0, -1.0]
+            scene.pot_handle_pos(env.data, env.h, "left", along), P.rot_down(0.0), [0.0, 0.0, -1.0]
         )
-        yield from P.pot_pick_place(env.data, env.h, self._last, dest[:2], place_z=place_z)
+        yield from P.pot_pick_place(env.data, env.h, self._last, dest[:2], place_z=place_z, along=along)
 
     def _plan_pot_to_tray(self):
         tray = self.read_state()[1]

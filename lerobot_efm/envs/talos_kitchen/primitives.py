@@ -295,13 +295,16 @@ def pot_pick_place(
     lift: float = 0.12,
     side: str = "left",
     place_yaw: float = 0.0,
+    along: float = 0.0,
 ) -> Iterator[np.ndarray]:
     """Grasp the pot by a handle from above, lift, carry, put its base centre at ``(place_xy, place_z)``.
 
     ``place_yaw`` (rad) turns the pot about the vertical while it is carried (the hand turns with
-    it); e.g. ``pi / 2`` puts the grasped +y handle towards the robot (handles along x).
+    it); e.g. ``pi / 2`` puts the grasped +y handle towards the robot (handles along x). ``along`` (m):
+    the grasp point on the handle bar, from its centre (a held grasp 1-2.5 cm towards -x reads a closure
+    of 0.6-1.0, at the centre 0.44: ``benchmarks/results/talos_pot_grasp_offsets.md``).
     """
-    hpos = scene.pot_handle_pos(data, handles, side)
+    hpos = scene.pot_handle_pos(data, handles, side, along)
     ppos, _ = scene.pot_pose(data, handles)
     mat = rot_down(0.0)
     down = np.array([0.0, 0.0, -1.0])

@@ -131,6 +131,7 @@ TRAY_POS0 = (
 )  # tray body origin when pushed in  # tray handle bar centre in the tray frame
 POT_RADIUS = 0.085
 POT_HEIGHT = 0.10
+POT_HANDLE_HALF_LENGTH = 0.065  # m, half the length of each handle bar (along the pot's x axis)
 
 
 def talos_data_dir() -> Path:
@@ -417,14 +418,14 @@ def _add_kitchen(spec: mujoco.MjSpec) -> None:
         pot.add_geom(
             name=f"pot_handle_{side}",
             type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-            fromto=[-0.065, yb, z, 0.065, yb, z],
+            fromto=[-POT_HANDLE_HALF_LENGTH, yb, z, POT_HANDLE_HALF_LENGTH, yb, z],
             size=[0.009, 0, 0],
             rgba=[0.15, 0.15, 0.15, 1],
             mass=0.05,
             contype=1,
             conaffinity=3,
         )
-        for j, x in enumerate((-0.065, 0.065)):
+        for j, x in enumerate((-POT_HANDLE_HALF_LENGTH, POT_HANDLE_HALF_LENGTH)):
             pot.add_geom(
                 name=f"pot_handle_{side}_arm{j}",
                 type=mujoco.mjtGeom.mjGEOM_CAPSULE,
@@ -613,13 +614,18 @@ def tray_handle_pos(data: mujoco.MjData, handles: KitchenHandles, slide: float |
     return np.array([x0, TRAY_POS0[1] + TRAY_HANDLE_LOCAL[1], TRAY_POS0[2] + TRAY_HANDLE_LOCAL[2]])
 
 
-def pot_handle_pos(data: mujoco.MjData, handles: KitchenHandles, side: str = "left") -> np.ndarray:
-    """World position (3,) of the centre of the pot's ``left`` (+y) or ``right`` (-y) handle bar."""
+def pot_handle_pos(
+    data: mujoco.MjData, handles: KitchenHandles, side: str = "left", along: float = 0.0
+) -> np.ndarray:
+    """World position (3,) of the pot's ``left`` (+y) or ``right`` (-y) handle bar, ``along`` m from its centre
+    along the bar (the pot's x axis; the bar spans +-``POT_HANDLE_HALF_LENGTH``)."""
+    if abs(along) > POT_HANDLE_HALF_LENGTH:
+        raise ValueError(f"along={along} m is off the pot's handle bar (+-{POT_HANDLE_HALF_LENGTH} m)")
     pos, quat = pot_pose(data, handles)
     mat = np.zeros(9)
     mujoco.mju_quat2Mat(mat, quat)
     s = 1.0 if side == "left" else -1.0
-    return pos + mat.reshape(3, 3) @ np.array([0.0, s * (POT_RADIUS + 0.065), POT_HEIGHT - 0.01])
+    return pos + mat.reshape(3, 3) @ np.array([along, s * (POT_RADIUS + 0.065), POT_HEIGHT - 0.01])
 
 
 def gripper_opening(data: mujoco.MjData, handles: KitchenHandles) -> float:
