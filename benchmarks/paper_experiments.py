@@ -513,6 +513,7 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
         "steps_per_s": round(budget.steps / train_s, 2) if train_s else None,
         "curve": curve,
         "train_command": shell(tcmd),
+        **train_segments(cell_dir),
         "eval_command": shell(ecmd),
         "finished": datetime.now(UTC).isoformat(timespec="seconds"),
     }
@@ -555,6 +556,12 @@ def train_or_resume(
         segments.append({"from_step": saved, "to_step": budget.steps, "seconds": round(wall, 1)})
         segments_path.write_text(json.dumps(segments, indent=2))
     return sum(s["seconds"] for s in segments) if segments else None
+
+
+def train_segments(cell_dir: Path) -> dict:
+    """``{"train_segments": [...]}`` for a training resumed after an interruption, else nothing."""
+    path = cell_dir / "train_segments.json"
+    return {"train_segments": json.loads(path.read_text())} if path.exists() else {}
 
 
 def saved_step(train_dir: Path) -> int | None:
@@ -829,6 +836,14 @@ def write_report(
             )
             + " |"
         )
+    resumed = [(k, c["train_segments"]) for k, c in cells.items() if c and c.get("train_segments")]
+    if resumed:
+        md += ["", "Resumed after an interruption (`lerobot-train --resume=true`; steps: seconds):", ""]
+        md += [
+            f"- {VARIANTS[v][2]} on {d}: "
+            + ", ".join(f"{s['from_step']}-{s['to_step']}: {s['seconds']:.0f}" for s in segments)
+            for (v, d), segments in resumed
+        ]
     md += ["", "## Datasets", ""]
     for d, info in datasets_info.items():
         gen = (

@@ -331,6 +331,8 @@ def test_tiny_end_to_end_run_and_resume(tmp_path):
     assert "Resuming data order" in (cell_dir / "train.log").read_text()
     resumed = json.loads((cell_dir / "result.json").read_text())
     assert resumed["train_s"] == pytest.approx(7.0 + segments[1]["seconds"], abs=0.1)
+    assert resumed["train_segments"] == segments  # the report says the training was resumed
+    assert "- FM-GC on pointmaze-large-navigate-v0: 0-10: 7, 10-20: " in out.read_text()
     assert pe.main(argv) == 0  # the report again holds both cells
 
     # --cached-only reports the finished cells of a wider selection and runs nothing for the others
