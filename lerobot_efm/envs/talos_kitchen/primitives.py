@@ -301,8 +301,8 @@ def pot_pick_place(
 
     ``place_yaw`` (rad) turns the pot about the vertical while it is carried (the hand turns with
     it); e.g. ``pi / 2`` puts the grasped +y handle towards the robot (handles along x). ``along`` (m):
-    the grasp point on the handle bar, from its centre (a held grasp 1-2.5 cm towards -x reads a closure
-    of 0.6-1.0, at the centre 0.44: ``benchmarks/results/talos_pot_grasp_offsets.md``).
+    the grasp point on the handle bar, from its centre (from the reset pose a held grasp 1-2.5 cm towards -x
+    reads a closure of 0.6-1.0, at the centre 0.44: ``benchmarks/results/talos_pot_grasp_offsets.md``).
     """
     hpos = scene.pot_handle_pos(data, handles, side, along)
     ppos, _ = scene.pot_pose(data, handles)
