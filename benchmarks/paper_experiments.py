@@ -22,7 +22,8 @@ longer than the config's ``scheduler_decay_steps`` stretches the decay to it.
 
 Resumable: a cell whose ``result.json`` exists under ``--work-dir`` is not re-run; a finished training whose
 evaluation is missing is only re-evaluated; an interrupted training resumes from its last checkpoint
-(``lerobot-train --resume=true``), its time summed over the segments (``train_segments.json``). Datasets are generated once under ``--data-root``. Cells of
+(``lerobot-train --resume=true``), its time summed over the segments (``train_segments.json``). Datasets are
+generated once under ``--data-root``. Cells of
 several invocations (or machines) meet in one report through ``--cached-only`` and ``--import-report`` (the
 committed JSON of an earlier report with the same budget).
 
@@ -529,8 +530,9 @@ def train_or_resume(
     tcmd: list[str], train_dir: Path, cell_dir: Path, budget: Budget, suite: Suite, dataset: str, variant: str
 ) -> float | None:
     """Train the cell, or resume an interrupted training from its last checkpoint; returns the training seconds
-    of all segments (None: a finished training of unknown duration). LeRobot resumes sample-exactly (weights, EMA, optimiser, schedule, RNG, data order); the
-    seconds of an interrupted segment up to its checkpoint are read from its progress bar."""
+    of all segments (None: a finished training of unknown duration). LeRobot resumes sample-exactly (weights,
+    EMA, optimiser, schedule, RNG, data order); the seconds of an interrupted segment up to its checkpoint are
+    read from its progress bar."""
     name = f"{suite.name}/{dataset}/{variant}"
     saved = saved_step(train_dir)
     if saved is None:
