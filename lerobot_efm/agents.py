@@ -27,7 +27,7 @@ from .configuration_efm import (
     TRAJ_PREFIX,
     EFMConfig,
 )
-from .flow import euler_integrate, flow_matching_loss, interpolate, sample_source
+from .flow import euler_integrate, flow_matching_loss, integrate, interpolate, sample_source
 from .networks import ConditionalUnet1d, EnsembleMLPFlow, ObservationEncoder
 
 # --------------------------------------------------------------------------------------------------
@@ -55,15 +55,15 @@ class Critic(nn.Module):
         x_t, target = interpolate(x_src, distance.reshape(1, -1, 1).expand(shape), t)
         return flow_matching_loss(self.net(x_t, t, cond), target) * self.num_critics
 
-    def query(self, cond: Tensor, eps: float | Tensor, num_steps: int) -> Tensor:
+    def query(self, cond: Tensor, eps: float | Tensor, num_steps: int, solver: str = "euler") -> Tensor:
         """Critic(eps | c) for every member: (E, B). ``eps`` is a float or an (E, B) tensor."""
         cache = self.net.condition(cond)
         x0 = torch.as_tensor(eps, dtype=cond.dtype, device=cond.device)
         x0 = x0.reshape(x0.shape + (1,)).expand(self.num_critics, cond.shape[0], 1)
-        return euler_integrate(lambda x, t: self.net.velocity(x, t, cache), x0, num_steps).squeeze(-1)
+        return integrate(lambda x, t: self.net.velocity(x, t, cache), x0, num_steps, solver).squeeze(-1)
 
-    def distance(self, cond: Tensor, eps: float | Tensor, num_steps: int) -> Tensor:
-        return self.query(cond, eps, num_steps).amax(dim=0)
+    def distance(self, cond: Tensor, eps: float | Tensor, num_steps: int, solver: str = "euler") -> Tensor:
+        return self.query(cond, eps, num_steps, solver).amax(dim=0)
 
 
 class TrajectoryFlow(nn.Module):
@@ -317,16 +317,18 @@ class EFMAgent(nn.Module, abc.ABC):
         filtered = cfg.rl_actor_slack is not None
         prefixes = (GOAL_PREFIX, RL_GOAL_PREFIX) + ((OBS_PREFIX,) if filtered else ())
         t_goal, t_rl_goal, *t_obs = target.encode(batch, prefixes)
+        steps, solver = cfg.rl_target_inference_steps or cfg.num_inference_steps, cfg.rl_target_solver
         eps = torch.rand(cfg.num_critics, l_obs.shape[0], device=l_obs.device) * cfg.rl_goal_ratio
-        bridge = target.critic.query(torch.cat([t_goal, t_rl_goal], -1), eps, cfg.num_inference_steps).amax(0)
+        bridge = target.critic.query(torch.cat([t_goal, t_rl_goal], -1), eps, steps, solver).amax(0)
         stitched = distance + bridge
         if cfg.rl_target_cap is not None:  # keeps the bootstrap from feeding on a runaway critic
             stitched = stitched.clamp(max=cfg.rl_target_cap)
         near_shortest = None
         if filtered:
-            near_shortest = stitched <= (1.0 + cfg.rl_actor_slack) * target.critic_distance(
-                t_obs[0], t_rl_goal
+            shortest = target.critic.distance(
+                torch.cat([t_obs[0], t_rl_goal], -1), cfg.critic_inference_eps, steps, solver
             )
+            near_shortest = stitched <= (1.0 + cfg.rl_actor_slack) * shortest
         return Rows(l_obs, l_rl_goal, stitched, actions, obs_traj), near_shortest
 
     def critic_loss(self, rows: Rows) -> Tensor:

@@ -18,6 +18,8 @@ from lerobot.optim.optimizers import OptimizerConfig
 from lerobot.optim.schedulers import CosineDecayWithWarmupSchedulerConfig
 from lerobot.utils.constants import OBS_PREFIX
 
+from .flow import SOLVERS
+
 # Batch-key prefixes the hindsight wrapper adds. Each mirrors every ``observation.<key>``:
 GOAL_PREFIX = OBS_PREFIX + "goal."  # the hindsight goal g = o_{k+d}
 RL_GOAL_PREFIX = OBS_PREFIX + "rl_goal."  # g' drawn from the whole dataset (RL bootstrap, eq. 5)
@@ -91,6 +93,12 @@ class EFMConfig(PreTrainedConfig):
             d' <= (1 + slack) * Critic_ema(0 | o, g'), i.e. whose chunk is on a near-shortest route to g'; the
             critics still learn from every row (None = every row for all, the paper's setting). A short run's
             actor cannot yet tell detours from d' alone and learns them (pointmaze stitch: 40 -> 14 %).
+        rl_target_solver, rl_target_inference_steps: ODE solver ("euler" or "heun") and steps (None =
+            ``num_inference_steps``) of the EMA critic queries of the bootstrap (eq. 5's bridge and the slack
+            filter); "euler" with ``num_inference_steps`` is the paper's. Each row integrates the critic ensemble
+            once or twice, most of a use-RL step's cost with large critics; a learnt critic flow is curved, so
+            20 Euler steps overestimate the bridge by ~6 frames where 5 Heun steps (10 evaluations) are within ~1
+            (``benchmarks/critic_ode_steps.py``).
 
     Deployment (a robot's observations carry no goal; :mod:`lerobot_efm.goal_source`):
         goal_path: a goal file (safetensors of one observation's ``observation.*`` keys, ``lerobot-efm-goal``).
@@ -148,6 +156,8 @@ class EFMConfig(PreTrainedConfig):
     rl_ramp_steps: int = 0
     rl_target_cap: float | None = None
     rl_actor_slack: float | None = None
+    rl_target_solver: str = "euler"
+    rl_target_inference_steps: int | None = None
 
     goal_path: str | None = None
     goal_dataset_root: str | None = None
@@ -228,6 +238,9 @@ class EFMConfig(PreTrainedConfig):
             "rl_ramp_steps": self.rl_ramp_steps >= 0,
             "rl_target_cap": self.rl_target_cap is None or self.rl_target_cap > 0,
             "rl_actor_slack": self.rl_actor_slack is None or self.rl_actor_slack >= 0,
+            "rl_target_solver": self.rl_target_solver in SOLVERS,
+            "rl_target_inference_steps": self.rl_target_inference_steps is None
+            or self.rl_target_inference_steps >= 1,
             "critic_inference_eps": 0.0 <= self.critic_inference_eps <= 1.0,
             "actor_distance_scale": self.actor_distance_scale > 0.0,
             "state_fourier_frequencies": self.state_fourier_frequencies >= 0,

@@ -15,6 +15,7 @@ from torch import Tensor
 VelocityFn = Callable[[Tensor, Tensor], Tensor]
 
 SOURCES = ("unit_ball", "gaussian")
+SOLVERS = ("euler", "heun")
 
 
 def sample_unit_ball(shape: tuple[int, ...], event_dims: int, *, device=None, generator=None) -> Tensor:
@@ -71,3 +72,30 @@ def euler_integrate(velocity: VelocityFn, x0: Tensor, num_steps: int) -> Tensor:
         t = torch.tensor(k * dt, device=x.device, dtype=x.dtype)
         x = x + dt * velocity(x, t)
     return x
+
+
+def heun_integrate(velocity: VelocityFn, x0: Tensor, num_steps: int) -> Tensor:
+    """Eq. (2) with Heun's second-order method: two velocity evaluations per step, error O(dt^2) against Euler's
+    O(dt). A learnt 1-D critic flow is far from straight near the extremum: with the paper's 3x1024 critics (planar
+    push, 12k steps) 20 Euler steps overestimate Critic(eps | g, g') by ~6 frames on average, 5 Heun steps
+    (10 evaluations) are within ~1 frame of the exact integral (``benchmarks/critic_ode_steps.py``)."""
+    if num_steps < 1:
+        raise ValueError(f"num_inference_steps must be >= 1, got {num_steps}.")
+    x = x0
+    dt = 1.0 / num_steps
+    for k in range(num_steps):
+        t0 = torch.tensor(k * dt, device=x.device, dtype=x.dtype)
+        t1 = torch.tensor(min((k + 1) * dt, 1.0), device=x.device, dtype=x.dtype)
+        v0 = velocity(x, t0)
+        v1 = velocity(x + dt * v0, t1)
+        x = x + 0.5 * dt * (v0 + v1)
+    return x
+
+
+def integrate(velocity: VelocityFn, x0: Tensor, num_steps: int, solver: str = "euler") -> Tensor:
+    """Eq. (2) with ``solver`` ("euler": the paper's and the reference's, "heun": second order)."""
+    if solver == "euler":
+        return euler_integrate(velocity, x0, num_steps)
+    if solver == "heun":
+        return heun_integrate(velocity, x0, num_steps)
+    raise ValueError(f"Unknown ODE solver {solver!r}; expected one of {SOLVERS}.")

@@ -63,9 +63,7 @@ def test_bootstrap_targets_are_capped(state_dataset, monkeypatch):
     """rl_target_cap bounds eq. 5's target d + bridge (units of max_goal_distance); None leaves it as it is."""
     policy, batch = _policy_and_batch(state_dataset, rl_target_cap=1.5)
     critic = policy.ema_model.critic
-    monkeypatch.setattr(
-        critic, "query", lambda cond, eps, steps: torch.full((eps.shape[0], cond.shape[0]), 5.0)
-    )
+    monkeypatch.setattr(critic, "query", lambda cond, eps, *_: torch.full((eps.shape[0], cond.shape[0]), 5.0))
     capped = policy.model.training_rows(batch, policy.ema_model).goal_conditioned.distance[-8:]
     assert torch.all(capped == 1.5)
     policy.config.rl_target_cap = None
@@ -91,3 +89,32 @@ def test_bootstrap_rows_take_the_batch_head(state_dataset):
     torch.testing.assert_close(rows.obs[base:], rows.obs[:n])
     torch.testing.assert_close(rows.actions[base:], batch["action"][:n])
     torch.testing.assert_close(rows.goal[base:], batch["observation.rl_goal.state"][:n])  # identity encoder
+
+
+def test_bootstrap_queries_use_the_target_solver_and_steps(state_dataset, monkeypatch):
+    """Eq. 5's bridge and the slack filter integrate the EMA critic with rl_target_solver and
+    rl_target_inference_steps; the defaults are the paper's: Euler with num_inference_steps."""
+    policy, batch = _policy_and_batch(
+        state_dataset, rl_actor_slack=0.5, rl_target_solver="heun", rl_target_inference_steps=3
+    )
+    critic, calls = policy.ema_model.critic, []
+    query = critic.query
+
+    def recording_query(cond, eps, steps, solver="euler"):
+        calls.append((steps, solver))
+        return query(cond, eps, steps, solver)
+
+    monkeypatch.setattr(critic, "query", recording_query)
+    policy.model.training_rows(batch, policy.ema_model)
+    assert calls == [(3, "heun"), (3, "heun")]  # bridge, then the slack filter's Critic(0 | o, g')
+    calls.clear()
+    policy.config.rl_target_solver, policy.config.rl_target_inference_steps = "euler", None
+    policy.model.training_rows(batch, policy.ema_model)
+    assert calls == [(policy.config.num_inference_steps, "euler")] * 2
+
+
+def test_invalid_target_solver_is_rejected():
+    with pytest.raises(ValueError, match="rl_target_solver='rk4'"):
+        tiny_config("efm_ac", use_rl=True, rl_target_solver="rk4")
+    with pytest.raises(ValueError, match="rl_target_inference_steps=0"):
+        tiny_config("efm_ac", use_rl=True, rl_target_inference_steps=0)
