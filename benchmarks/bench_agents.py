@@ -151,7 +151,23 @@ def variant_name(policy_type: str, use_rl: bool) -> str:
     return f"{name} {'use-RL' if use_rl else 'no-RL'}"
 
 
-def build_policy(config_name: str, policy_type: str, use_rl: bool, num_inference_steps: int):
+def parse_overrides(items: list[str]) -> dict:
+    """``NAME=VALUE`` config overrides; VALUE is read as JSON (numbers, null, lists), else kept as a string."""
+    overrides = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise SystemExit(f"--set {item!r}: expected NAME=VALUE")
+        try:
+            overrides[name] = json.loads(value)
+        except json.JSONDecodeError:
+            overrides[name] = value
+    return overrides
+
+
+def build_policy(
+    config_name: str, policy_type: str, use_rl: bool, num_inference_steps: int, overrides: dict | None = None
+):
     spec = CONFIGS[config_name]
     cfg = PreTrainedConfig.get_choice_class(policy_type)(
         device="cpu",
@@ -159,7 +175,7 @@ def build_policy(config_name: str, policy_type: str, use_rl: bool, num_inference
         num_inference_steps=num_inference_steps,
         input_features=dict(spec["input_features"]),
         output_features={"action": PolicyFeature(FeatureType.ACTION, (spec["action_dim"],))},
-        **spec["overrides"],
+        **{**spec["overrides"], **(overrides or {})},
     )
     policy = get_policy_class(policy_type)(cfg)  # default network sizes
     return policy, policy.config
@@ -332,6 +348,7 @@ def render_markdown(results: dict) -> str:
         f"lerobot {machine['lerobot']}, Python {machine['python']}; training at {t2} threads "
         f"(`torch.set_num_threads`), load average at start {_fmt_load(machine['load_average_at_start'])}.",
         "",
+        *([f"Config overrides for every variant: `{' '.join(args['set'])}`.", ""] if args.get("set") else []),
         "* **train steps/s**: one step = `policy.forward(batch)` + `backward` + `clip_grad_norm_(…, 1.0)` + AdamW step "
         "(the policy's preset) + `zero_grad` + LR-scheduler step + `policy.update()` (EMA), i.e. lerobot-train's "
         "`update_policy`; **data loading excluded** (the reference's numbers include its data sampling, ~1% of a step). "
@@ -464,6 +481,13 @@ def parse_args(argv=None):
         help="markdown report; the JSON goes next to it",
     )
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="config field for every variant (repeatable), e.g. rl_target_solver=heun",
+    )
     return p.parse_args(argv)
 
 
@@ -508,13 +532,16 @@ def main(argv=None) -> dict:
         for policy_type, use_rl in variants:
             name = variant_name(policy_type, use_rl)
             torch.manual_seed(args.seed)
-            policy, cfg = build_policy(config_name, policy_type, use_rl, args.num_inference_steps)
+            policy, cfg = build_policy(
+                config_name, policy_type, use_rl, args.num_inference_steps, parse_overrides(args.set)
+            )
             v = {
                 "name": name,
                 "type": policy_type,
                 "use_rl": use_rl,
                 "params": count_params(policy.model),
                 "params_by_component": {n: count_params(m) for n, m in policy.model.named_children()},
+                "config_overrides": {name: getattr(cfg, name) for name in parse_overrides(args.set)},
             }
             log(f"{config_name} / {name}: {v['params'] / 1e6:.2f} M params")
             if not args.skip_train:
