@@ -71,20 +71,9 @@ def ogbench_pairs(dataset: str, max_steps: int = 1000) -> tuple[np.ndarray, np.n
 
 def critic_steps(checkpoint: Path, starts: np.ndarray, goals: np.ndarray) -> list[float]:
     """Critic(0 | start, goal) in steps for each pair, through the checkpoint's own pre-processor."""
-    from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.policies import make_pre_post_processors
-    from lerobot.policies.factory import get_policy_class
+    from checkpoint_loading import load_policy
 
-    import lerobot_efm  # noqa: F401  (registers the policies)
-
-    cfg = PreTrainedConfig.from_pretrained(checkpoint)
-    cfg.device = "cpu"
-    policy = get_policy_class(cfg.type).from_pretrained(checkpoint, config=cfg).eval()
-    pre, _ = make_pre_post_processors(
-        policy_cfg=cfg,
-        pretrained_path=str(checkpoint),
-        preprocessor_overrides={"device_processor": {"device": "cpu"}},
-    )
+    policy, pre, _ = load_policy(checkpoint)
     start = torch.tensor(starts, dtype=torch.float32)
     goal = torch.tensor(goals, dtype=torch.float32)
     batch = pre({"observation.state": start, "observation.goal.state": goal, "task": [""] * len(starts)})

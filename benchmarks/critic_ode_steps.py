@@ -38,21 +38,10 @@ def load_states(root: Path) -> np.ndarray:
 
 def load_agent(checkpoint: Path):
     """The EMA agent (the bootstrap's target network) and the checkpoint's pre-processor, on the CPU."""
-    from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.policies import make_pre_post_processors
-    from lerobot.policies.factory import get_policy_class
+    from checkpoint_loading import load_policy
 
-    import lerobot_efm  # noqa: F401  (registers the policies)
-
-    cfg = PreTrainedConfig.from_pretrained(checkpoint)
-    cfg.device = "cpu"
-    policy = get_policy_class(cfg.type).from_pretrained(checkpoint, config=cfg).eval()
-    pre, _ = make_pre_post_processors(
-        policy_cfg=cfg,
-        pretrained_path=str(checkpoint),
-        preprocessor_overrides={"device_processor": {"device": "cpu"}},
-    )
-    return policy.ema_model, pre, cfg
+    policy, pre, _ = load_policy(checkpoint)
+    return policy.ema_model, pre, policy.config
 
 
 def measure(

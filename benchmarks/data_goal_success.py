@@ -65,23 +65,11 @@ def sample_pairs(states, episodes, n, rng, min_gap=60, max_gap=400):
 
 
 def evaluate(checkpoint: Path, pairs, max_steps: int, device: str, overrides: dict | None = None) -> dict:
-    from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.policies import make_pre_post_processors
-    from lerobot.policies.factory import get_policy_class
+    from checkpoint_loading import load_policy
 
-    import lerobot_efm  # noqa: F401  (registers the policies)
     from lerobot_efm.envs.planar_push.env import PlanarPushEnv
 
-    cfg = PreTrainedConfig.from_pretrained(checkpoint)
-    cfg.device = device
-    for name, value in (overrides or {}).items():
-        setattr(cfg, name, type(getattr(cfg, name))(value))
-    policy = get_policy_class(cfg.type).from_pretrained(checkpoint, config=cfg).eval()
-    pre, post = make_pre_post_processors(
-        policy_cfg=cfg,
-        pretrained_path=str(checkpoint),
-        preprocessor_overrides={"device_processor": {"device": device}},
-    )
+    policy, pre, post = load_policy(checkpoint, device, overrides)
     envs = [PlanarPushEnv(task="pair0") for _ in pairs]
     for env, (start, goal) in zip(envs, pairs, strict=True):
         env.reset(options={"initial": start, "goal": goal})
