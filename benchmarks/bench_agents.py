@@ -510,6 +510,7 @@ def main(argv=None) -> dict:
         if args.rl in ("both", "use"):
             variants.append((t, True))
     latency_threads = sorted({args.threads, 1}, reverse=True)
+    overrides = parse_overrides(args.set)
 
     results = {
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -532,16 +533,14 @@ def main(argv=None) -> dict:
         for policy_type, use_rl in variants:
             name = variant_name(policy_type, use_rl)
             torch.manual_seed(args.seed)
-            policy, cfg = build_policy(
-                config_name, policy_type, use_rl, args.num_inference_steps, parse_overrides(args.set)
-            )
+            policy, cfg = build_policy(config_name, policy_type, use_rl, args.num_inference_steps, overrides)
             v = {
                 "name": name,
                 "type": policy_type,
                 "use_rl": use_rl,
                 "params": count_params(policy.model),
                 "params_by_component": {n: count_params(m) for n, m in policy.model.named_children()},
-                "config_overrides": {name: getattr(cfg, name) for name in parse_overrides(args.set)},
+                "config_overrides": {name: getattr(cfg, name) for name in overrides},
             }
             log(f"{config_name} / {name}: {v['params'] / 1e6:.2f} M params")
             if not args.skip_train:

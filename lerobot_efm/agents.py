@@ -227,10 +227,13 @@ class EFMAgent(nn.Module, abc.ABC):
         merged = {OBS_PREFIX + k: torch.cat([batch[p + k] for p in prefixes]) for k in keys}
         return list(self.encoder(merged).split(batch[prefixes[0] + keys[0]].shape[0]))
 
-    def critic_distance(self, obs: Tensor, goal: Tensor) -> Tensor:
+    def critic_distance(
+        self, obs: Tensor, goal: Tensor, num_steps: int | None = None, solver: str = "euler"
+    ) -> Tensor:
+        """Critic(critic_inference_eps | o, g), integrated with ``num_steps`` (None: num_inference_steps)."""
         cfg = self.config
         return self.critic.distance(
-            torch.cat([obs, goal], -1), cfg.critic_inference_eps, cfg.num_inference_steps
+            torch.cat([obs, goal], -1), cfg.critic_inference_eps, num_steps or cfg.num_inference_steps, solver
         )
 
     # --- training ----------------------------------------------------------------------------------
@@ -325,9 +328,7 @@ class EFMAgent(nn.Module, abc.ABC):
             stitched = stitched.clamp(max=cfg.rl_target_cap)
         near_shortest = None
         if filtered:
-            shortest = target.critic.distance(
-                torch.cat([t_obs[0], t_rl_goal], -1), cfg.critic_inference_eps, steps, solver
-            )
+            shortest = target.critic_distance(t_obs[0], t_rl_goal, steps, solver)
             near_shortest = stitched <= (1.0 + cfg.rl_actor_slack) * shortest
         return Rows(l_obs, l_rl_goal, stitched, actions, obs_traj), near_shortest
 
