@@ -228,13 +228,14 @@ class EFMAgent(nn.Module, abc.ABC):
         return list(self.encoder(merged).split(batch[prefixes[0] + keys[0]].shape[0]))
 
     def critic_distance(
-        self, obs: Tensor, goal: Tensor, num_steps: int | None = None, solver: str = "euler"
+        self, obs: Tensor, goal: Tensor, num_steps: int | None = None, solver: str | None = None
     ) -> Tensor:
-        """Critic(critic_inference_eps | o, g), integrated with ``num_steps`` (None: num_inference_steps)."""
+        """Critic(critic_inference_eps | o, g), integrated with ``num_steps`` steps of ``solver`` (None: the
+        acting query's, ``critic_inference_steps`` / ``critic_inference_solver``)."""
         cfg = self.config
-        return self.critic.distance(
-            torch.cat([obs, goal], -1), cfg.critic_inference_eps, num_steps or cfg.num_inference_steps, solver
-        )
+        steps = num_steps or cfg.critic_inference_steps or cfg.num_inference_steps
+        solver = solver or cfg.critic_inference_solver
+        return self.critic.distance(torch.cat([obs, goal], -1), cfg.critic_inference_eps, steps, solver)
 
     # --- training ----------------------------------------------------------------------------------
     def num_bootstrap_rows(self, batch_size: int, step: int | None) -> int:

@@ -538,6 +538,35 @@ def test_actor_distance_scale_conditions_on_that_fraction_of_the_critics_distanc
         state_config(policy_type, actor_distance_scale=0.0)
 
 
+@pytest.mark.parametrize("policy_type", CRITIC_TYPES)
+def test_acting_queries_the_critic_with_the_inference_solver_and_steps(policy_type):
+    """Every critic query when acting (FM-AC / FM-PC conditioning, FM-PS / FM-AS scores) integrates with
+    critic_inference_solver and critic_inference_steps; the defaults are the paper's Euler with
+    num_inference_steps. Fails if an agent's act() bypasses them."""
+    policy = make(policy_type, critic_inference_solver="heun", critic_inference_steps=3)
+    policy.eval()
+    critic, calls = policy.ema_model.critic, []
+    query = critic.query
+
+    def recording_query(cond, eps, steps, solver="euler"):
+        calls.append((steps, solver))
+        return query(cond, eps, steps, solver)
+
+    critic.query = recording_query
+    batch = hand_batch(policy.config, 2)
+    policy.predict_action_chunk({STATE: batch[STATE], GOAL: batch[GOAL]})
+    assert calls and set(calls) == {(3, "heun")}, calls
+    calls.clear()
+    cfg = policy.ema_model.config  # the acting EMA agent's (a copy)
+    cfg.critic_inference_solver, cfg.critic_inference_steps = "euler", None
+    policy.predict_action_chunk({STATE: batch[STATE], GOAL: batch[GOAL]})
+    assert calls and set(calls) == {(cfg.num_inference_steps, "euler")}, calls
+    with pytest.raises(ValueError, match="critic_inference_solver='rk4'"):
+        state_config(policy_type, critic_inference_solver="rk4")
+    with pytest.raises(ValueError, match="critic_inference_steps=0"):
+        state_config(policy_type, critic_inference_steps=0)
+
+
 def _spearman(a, b):
     ra, rb = a.argsort().argsort().double(), b.argsort().argsort().double()
     ra, rb = ra - ra.mean(), rb - rb.mean()
