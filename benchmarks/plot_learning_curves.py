@@ -23,9 +23,28 @@ def overrides_name(train_args: list[str]) -> str:
     return " ".join(arg.removeprefix("--").removeprefix("policy.") for arg in train_args)
 
 
+# Recorder options the paper runner pins for a dataset's committed cells (``paper_experiments.PLANAR_OPTIONS``,
+# or options that once were defaults): a recording made with only these is the dataset's standard one.
+STANDARD_RECORDER_OPTIONS = {"wall_slides=0", "open_stops=0", "balanced_corners=false"}
+
+
+def recording_name(payload: dict, dataset: str) -> str:
+    """``'recorded with corner_episodes=1.0'``: the recorder options beyond the standard ones of the recording a
+    cell trained on (from the report's dataset provenance), so that cells of another recording are another
+    setting instead of more seeds of this one."""
+    command = str((payload.get("datasets") or {}).get(dataset, {}).get("command") or "")
+    options = [
+        arg.removeprefix("--operator.")
+        for arg in command.split()
+        if arg.startswith("--operator.") and not arg.startswith("--operator.type=")
+    ]
+    extra = [o for o in options if o not in STANDARD_RECORDER_OPTIONS]
+    return f"recorded with {' '.join(extra)}" if extra else ""
+
+
 def load_cells(reports: list[Path], require_curve: bool = True) -> list[dict]:
     """Every cell (with a learning curve unless ``require_curve`` is false), tagged with its report's seed and
-    setting (config, overrides, budget)."""
+    setting (config, overrides, budget, recording)."""
     cells = []
     for path in reports:
         payload = json.loads(path.read_text())
@@ -35,7 +54,8 @@ def load_cells(reports: list[Path], require_curve: bool = True) -> list[dict]:
         for cell in payload.get("cells", []):
             if cell.get("curve") or not require_curve:
                 config = Path(cell.get("config") or payload.get("config", "")).stem
-                setting = " ".join(part for part in (config, overrides, budget_steps) if part)
+                recording = recording_name(payload, cell.get("dataset", ""))
+                setting = " ".join(part for part in (config, overrides, budget_steps, recording) if part)
                 cells.append(
                     {
                         **cell,

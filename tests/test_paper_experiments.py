@@ -451,6 +451,15 @@ def test_seed_means_groups_seeds_of_one_setting(tmp_path):
         ("c 12k steps", [1000, 2000], [20.0, 30.0], [20.0, 40.0]),
         ("c rl_actor_slack=0.2 12k steps", [1000], [60.0], [60.0]),
     ]
+    # a run on another recording (recorder options beyond the pinned standard ones) is another setting too
+    other = json.loads((tmp_path / reports[1]).read_text())
+    recorder = "python -m lerobot_efm.envs.planar_push.demonstrators --operator.type=planar_push_partitioned"
+    other["datasets"] = {"partitioned": {"command": f"{recorder} --operator.corner_after=250 --num_frames=9"}}
+    (tmp_path / "d.json").write_text(json.dumps(other))
+    other["datasets"] = {"partitioned": {"command": f"{recorder} --operator.wall_slides=0 --num_frames=9"}}
+    (tmp_path / "e.json").write_text(json.dumps(other))
+    settings = [c["setting"] for c in means.load_cells([tmp_path / "d.json", tmp_path / "e.json"], False)]
+    assert settings == ["c 12k steps recorded with corner_after=250", "c 12k steps"]
     table = means.main(reports)
     assert "| 20 / 30 | 25.0 ± 7.1 | 20 / 40 | 30.0 ± 14.1 | 50 / 50 | 50.0 ± 0.0 |" in table
     assert "| 60 | 60.0 |" in table
