@@ -79,24 +79,30 @@ def test_coverage_counts_task_states():
 
 def test_play_moves_door_tray_and_pot(env):
     """A few thousand steps (fast physics-only ``env.advance``) change every object, in both directions."""
-    env.reset(seed=0)
-    # seed 4: seeds 3 and 4 cover every task state in 6000 steps (with pot_grasp_spread=0.025 only seed 4),
-    # seed 1 never opens the door and seed 2 never puts the pot on the tray (the draws are random)
-    op = play.TalosPlayOperator(env, np.random.default_rng(4))
-    states = []
-    for _ in range(2):  # two episodes of 3000 steps
-        states.append(op.reset()["environment_state"])
-        for _ in range(3000):
-            env.advance(op.act(None))
-            states.append(op.read_state()[3])
-    s = np.array(states, dtype=float)
-    assert s[:, 0].min() < -0.9 and s[:, 1].min() < -0.2
-    assert np.linalg.norm(s[:, 2:5] - s[0, 2:5], axis=1).max() > 0.1
-    cov = play.coverage(s)
+    # Two operators (seeds 3 and 4), two 3000-step episodes each: whether one seed's 6000 steps put the pot on the
+    # tray is a chance event that floating-point details of the CPU decide (seed 4 did on one machine, not on
+    # another); together they cover every task state on both.
+    visits, stats = {}, []
+    for seed in (3, 4):
+        env.reset(seed=0)
+        op = play.TalosPlayOperator(env, np.random.default_rng(seed))
+        states = []
+        for _ in range(2):
+            states.append(op.reset()["environment_state"])
+            for _ in range(3000):
+                env.advance(op.act(None))
+                states.append(op.read_state()[3])
+        s = np.array(states, dtype=float)
+        assert s[:, 0].min() < -0.9 and s[:, 1].min() < -0.2
+        assert np.linalg.norm(s[:, 2:5] - s[0, 2:5], axis=1).max() > 0.1
+        for name, c in play.coverage(s).items():
+            visits[name] = visits.get(name, 0) + c["visits"]
+        stats.append(op.stats)
     for name in ("door_open", "door_closed", "tray_out", "tray_in", "pot_home", "pot_moved", "pot_on_tray"):
-        assert cov[name]["visits"] >= 1, (name, cov)
-    assert sum(v["attempted"] for v in op.stats.values()) >= 15, op.stats
-    assert sum(v["succeeded"] for k, v in op.stats.items() if k not in ("home", "wander")) >= 8, op.stats
+        assert visits[name] >= 1, (name, visits)
+    for st in stats:
+        assert sum(v["attempted"] for v in st.values()) >= 15, st
+        assert sum(v["succeeded"] for k, v in st.items() if k not in ("home", "wander")) >= 8, st
 
 
 def _pot_grasp_points(env, monkeypatch, n, **kwargs):
