@@ -50,6 +50,8 @@ from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
+from recorder_pins import PLANAR_PINS
+
 from lerobot_efm.modeling_efm import AGENT_NAMES
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -121,9 +123,6 @@ PLANAR_PAPER_ROWS = {
 PLANAR_DATASETS = ("expert", "full", "partitioned")
 # Paper dataset sizes (frames of mouse teleoperation at 20 Hz): reach_goal / play_full / play_stitch.
 PLANAR_FRAMES = {"expert": 46_793, "full": 36_661, "partitioned": 29_087}
-# Recorder options pinned per dataset: the committed partitioned cells were run on play recorded before wall
-# slides, open-space stops and balanced corners became the defaults (measured on full play only so far).
-PLANAR_OPTIONS = {"partitioned": ["wall_slides=0", "open_stops=0", "balanced_corners=false"]}
 OGBENCH_DATASETS = tuple(OGBENCH_PAPER)
 
 SUITES: dict[str, Suite] = {
@@ -261,7 +260,7 @@ def generate_command(suite: str, dataset: str, root: Path, spec: DataSpec) -> li
         *py,
         "lerobot_efm.envs.planar_push.demonstrators",
         f"--operator.type=planar_push_{dataset}",
-        *[f"--operator.{option}" for option in PLANAR_OPTIONS.get(dataset, [])],
+        *[f"--operator.{option}" for option in PLANAR_PINS.get(dataset, ())],
         f"--dataset.repo_id={dataset_repo_id(suite, dataset)}",
         f"--dataset.root={root}",
         f"--num_frames={frames}",

@@ -17,15 +17,12 @@ import argparse
 import json
 from pathlib import Path
 
+from recorder_pins import standard_options
+
 
 def overrides_name(train_args: list[str]) -> str:
     """``['--policy.state_encoder=fourier']`` -> ``'state_encoder=fourier'``: what set a run apart."""
     return " ".join(arg.removeprefix("--").removeprefix("policy.") for arg in train_args)
-
-
-# Recorder options the paper runner pins for a dataset's committed cells (``paper_experiments.PLANAR_OPTIONS``,
-# or options that once were defaults): a recording made with only these is the dataset's standard one.
-STANDARD_RECORDER_OPTIONS = {"wall_slides=0", "open_stops=0", "balanced_corners=false"}
 
 
 def recording_name(payload: dict, dataset: str) -> str:
@@ -38,7 +35,7 @@ def recording_name(payload: dict, dataset: str) -> str:
         for arg in command.split()
         if arg.startswith("--operator.") and not arg.startswith("--operator.type=")
     ]
-    extra = [o for o in options if o not in STANDARD_RECORDER_OPTIONS]
+    extra = [o for o in options if o not in standard_options()]
     return f"recorded with {' '.join(extra)}" if extra else ""
 
 

@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+# the runner and the plots import their shared modules as scripts do
+sys.path.insert(0, str(REPO / "benchmarks"))
 spec = importlib.util.spec_from_file_location(
     "paper_experiments", REPO / "benchmarks" / "paper_experiments.py"
 )
@@ -420,13 +422,9 @@ def test_plot_learning_curves_draws_cells_with_curves(tmp_path):
 
 
 def test_seed_means_groups_seeds_of_one_setting(tmp_path):
-    sys.path.insert(0, str(REPO / "benchmarks"))  # seed_means imports the plotter's loader, as a script does
-    try:
-        spec = importlib.util.spec_from_file_location("seed_means", REPO / "benchmarks" / "seed_means.py")
-        means = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(means)
-    finally:
-        sys.path.remove(str(REPO / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("seed_means", REPO / "benchmarks" / "seed_means.py")
+    means = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(means)
 
     def report(name, seed, success, curve, train_args=()):
         path = tmp_path / name
