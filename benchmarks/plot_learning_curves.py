@@ -17,7 +17,7 @@ import argparse
 import json
 from pathlib import Path
 
-from recorder_pins import standard_options
+from recorder_pins import STANDARD_OPTIONS
 
 
 def overrides_name(train_args: list[str]) -> str:
@@ -35,7 +35,7 @@ def recording_name(payload: dict, dataset: str) -> str:
         for arg in command.split()
         if arg.startswith("--operator.") and not arg.startswith("--operator.type=")
     ]
-    extra = [o for o in options if o not in standard_options()]
+    extra = [o for o in options if o not in STANDARD_OPTIONS]
     return f"recorded with {' '.join(extra)}" if extra else ""
 
 

@@ -11,7 +11,5 @@ PLANAR_PINS: dict[str, tuple[str, ...]] = {
     "partitioned": ("wall_slides=0", "open_stops=0", "balanced_corners=false"),
 }
 
-
-def standard_options() -> set[str]:
-    """Every pinned option (``NAME=VALUE``, without ``--operator.``): not a mark of a non-standard recording."""
-    return {option for options in PLANAR_PINS.values() for option in options}
+# every pinned option (``NAME=VALUE``, without ``--operator.``): not a mark of a non-standard recording
+STANDARD_OPTIONS = frozenset(option for options in PLANAR_PINS.values() for option in options)
