@@ -459,11 +459,13 @@ def parse_eval_info(
 def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Path, budget: Budget) -> dict:
     """Train (unless a finished checkpoint exists) and evaluate one cell; writes ``cell_dir/result.json``."""
     result_path = cell_dir / RESULT_FILE
-    if result_path.exists():
-        return {**json.loads(result_path.read_text()), "cached": True}
     train_dir, eval_dir = cell_dir / "train", cell_dir / "eval"
     checkpoint = train_dir / CHECKPOINT
     tcmd = train_command(suite, variant, data, dataset_repo_id(suite.name, dataset), train_dir, budget)
+    if (checkpoint / "config.json").exists():  # a cached result or a resumed run: same hyper-parameters only
+        check_config_unchanged(trained_policy_config(checkpoint), tcmd, load_config(suite, budget), cell_dir)
+    if result_path.exists():
+        return {**json.loads(result_path.read_text()), "cached": True}
     train_time = cell_dir / "train_seconds.txt"  # kept for re-evaluations of a finished training
     if not train_time.exists():
         seconds = train_or_resume(tcmd, train_dir, cell_dir, budget, suite, dataset, variant)
@@ -512,6 +514,7 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
         "config": f"train_configs/{config_name(suite, budget)}",
         "steps_per_s": round(budget.steps / train_s, 2) if train_s else None,
         "curve": curve,
+        "policy_config": trained_policy_config(checkpoint),
         "train_command": shell(tcmd),
         **train_segments(cell_dir),
         "eval_command": shell(ecmd),
@@ -523,6 +526,30 @@ def run_cell(suite: Suite, variant: str, dataset: str, data: Path, cell_dir: Pat
         flush=True,
     )
     return result
+
+
+def trained_policy_config(checkpoint: Path) -> dict:
+    """The hyper-parameters the checkpoint was trained with (its ``config.json``: config file plus every CLI
+    override, resolved by lerobot-train): what a report's cell ran, even after the config file changes."""
+    saved = json.loads((checkpoint / "config.json").read_text())
+    return {k: v for k, v in saved.items() if k not in ("input_features", "output_features")}
+
+
+def check_config_unchanged(trained: dict, tcmd: list[str], config: dict, cell_dir: Path) -> None:
+    """Refuse a cell whose checkpoint was trained with other values than its config file holds now (the file
+    was edited since: e.g. the CPU configs' learning rate): its cached result or resumed training would be
+    reported under the new values. Keys the train command sets (agent, device, budget, --train-arg) are its own."""
+    on_cli = {arg.split("=", 1)[0].removeprefix("--policy.") for arg in tcmd if arg.startswith("--policy.")}
+    changed = [
+        f"{key}: trained {trained[key]!r}, config now {value!r}"
+        for key, value in config["policy"].items()
+        if key not in on_cli and key in trained and trained[key] != value
+    ]
+    if changed:
+        raise RuntimeError(
+            f"{cell_dir} was trained with other hyper-parameters than its config now holds ({'; '.join(changed)}): "
+            "pass another --work-dir, or delete that directory to retrain it"
+        )
 
 
 def train_or_resume(
@@ -771,7 +798,9 @@ def write_report(
         "",
         f"Hyper-parameters: `train_configs/{config_name(suite, budget)}`, training seed {budget.seed} (one fixed set for every agent and dataset, as in the "
         f"paper), with `--policy.type` / `--policy.use_rl` per agent"
-        + (" and the budget overrides above." if not full else "."),
+        + (" and the budget overrides above" if not full else "")
+        + "; the values each cell trained with (config file and overrides, resolved by lerobot-train) are its "
+        "`policy_config` in the JSON file next to this report.",
         "",
         f"## Success rate (%): ours | {suite.paper_source}",
         "",

@@ -17,12 +17,36 @@ import argparse
 import json
 from pathlib import Path
 
+from config_baselines import LABEL_BASELINES
 from recorder_pins import STANDARD_OPTIONS
 
 
-def overrides_name(train_args: list[str]) -> str:
-    """``['--policy.state_encoder=fourier']`` -> ``'state_encoder=fourier'``: what set a run apart."""
-    return " ".join(arg.removeprefix("--").removeprefix("policy.") for arg in train_args)
+def number_spelling(value: str) -> str:
+    """``'0.0003'`` and ``'3e-4'`` -> ``'3e-4'``, ``'5.0'`` -> ``'5'``: one spelling per number, so that a value set
+    by flag and the same value read from a checkpoint label one setting; other text is kept."""
+    try:
+        number = float(value)
+    except ValueError:
+        return value
+    if number != 0 and abs(number) < 1e-2:
+        mantissa, exponent = f"{number:e}".split("e")
+        return f"{float(mantissa):g}e{int(exponent)}"
+    return f"{number:g}"
+
+
+def overrides_name(train_args: list[str], policy_config: dict | None = None, config: str = "") -> str:
+    """``['--policy.state_encoder=fourier']`` -> ``'state_encoder=fourier'``: what set a run apart, sorted by name;
+    plus every value of the cell's resolved ``policy_config`` that departs from the value its config held when
+    the older reports were made (``config_baselines``)."""
+    named: dict[str, str] = {}
+    for arg in train_args:
+        name, sep, value = arg.removeprefix("--").removeprefix("policy.").partition("=")
+        named[name] = f"{name}={number_spelling(value)}" if sep else name
+    for key, baseline in LABEL_BASELINES.get(config, {}).items():
+        resolved = (policy_config or {}).get(key)
+        if key not in named and resolved is not None and float(resolved) != baseline:
+            named[key] = f"{key}={number_spelling(str(resolved))}"
+    return " ".join(named[name] for name in sorted(named))
 
 
 def recording_name(payload: dict, dataset: str) -> str:
@@ -46,11 +70,11 @@ def load_cells(reports: list[Path], require_curve: bool = True) -> list[dict]:
     for path in reports:
         payload = json.loads(path.read_text())
         budget = payload.get("budget", {})
-        overrides = overrides_name(budget.get("train_args", []))
         budget_steps = f"{budget['steps'] // 1000}k steps" if budget.get("steps") else ""
         for cell in payload.get("cells", []):
             if cell.get("curve") or not require_curve:
                 config = Path(cell.get("config") or payload.get("config", "")).stem
+                overrides = overrides_name(budget.get("train_args", []), cell.get("policy_config"), config)
                 recording = recording_name(payload, cell.get("dataset", ""))
                 setting = " ".join(part for part in (config, overrides, budget_steps, recording) if part)
                 cells.append(

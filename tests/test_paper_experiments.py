@@ -296,6 +296,11 @@ def test_tiny_end_to_end_run_and_resume(tmp_path):
             "velocity",
         )
         assert saved["pc_success"] == cell["pc_success"]
+        # the report keeps the resolved hyper-parameters: config file plus --train-arg overrides
+        assert cell["policy_config"]["type"] == policy_type and cell["policy_config"]["use_rl"] == (
+            rl == "true"
+        )
+        assert cell["policy_config"]["mlp_hidden_dims"] == [32, 32]  # TINY_TRAIN's override
         # the learning curve: the step-10 checkpoint evaluated too, the last point is the cell's result
         assert [p["step"] for p in cell["curve"]] == [10, 20] and cell["curve"][-1]["pc_success"] == cell[
             "pc_success"
@@ -458,6 +463,26 @@ def test_seed_means_groups_seeds_of_one_setting(tmp_path):
     (tmp_path / "e.json").write_text(json.dumps(other))
     settings = [c["setting"] for c in means.load_cells([tmp_path / "d.json", tmp_path / "e.json"], False)]
     assert settings == ["c 12k steps recorded with corner_after=250", "c 12k steps"]
+
+    # a config whose value changed after the older reports: a new cell that ran the new value without a flag
+    # (its resolved policy_config) groups with the old cells that set it by flag, not with the old default
+    def resolved_run(name, lr, train_args=()):
+        payload = json.loads((tmp_path / report(name, 3000, 50.0, [50.0], train_args)).read_text())
+        payload["config"] = "train_configs/planar_push_efm_cpu.json"
+        payload["cells"][0]["policy_config"] = {"optimizer_lr": lr}
+        (tmp_path / name).write_text(json.dumps(payload))
+        return tmp_path / name
+
+    runs = [
+        resolved_run("new.json", 0.0003),
+        resolved_run("old_default.json", 0.0001),
+        resolved_run("flagged.json", 0.0003, ["--policy.rl_actor_slack=0.2", "--policy.optimizer_lr=3e-4"]),
+    ]
+    assert [c["setting"] for c in means.load_cells(runs, False)] == [
+        "planar_push_efm_cpu optimizer_lr=3e-4 12k steps",
+        "planar_push_efm_cpu 12k steps",
+        "planar_push_efm_cpu optimizer_lr=3e-4 rl_actor_slack=0.2 12k steps",
+    ]
     table = means.main(reports)
     assert "| 20 / 30 | 25.0 ± 7.1 | 20 / 40 | 30.0 ± 14.1 | 50 / 50 | 50.0 ± 0.0 |" in table
     assert "| 60 | 60.0 |" in table
@@ -488,3 +513,16 @@ def test_two_runners_sharing_a_data_root_generate_it_once(tmp_path, monkeypatch)
     assert generations.read_text() == "once\n"
     assert results[0][0] == results[1][0] and (results[0][0] / "meta" / "info.json").exists()
     assert sorted(r[2] > 0 for r in results) == [True, True]  # both name the generating run and its time
+
+
+def test_cells_trained_with_an_edited_config_are_refused(tmp_path):
+    """A cached cell or a run to resume whose checkpoint holds other values than the config file now does would
+    be reported under the new values: the runner names the key and both values instead."""
+    config = {"policy": {"type": "efm_ac", "optimizer_lr": 3e-4, "mlp_hidden_dims": [256, 256]}}
+    trained = {"type": "efm_pc", "optimizer_lr": 1e-4, "mlp_hidden_dims": [256, 256]}
+    cmd = ["lerobot-train", "--policy.type=efm_pc"]
+    with pytest.raises(RuntimeError, match=r"optimizer_lr: trained 0.0001, config now 0.0003.*--work-dir"):
+        pe.check_config_unchanged(trained, cmd, config, tmp_path)
+    # a value the train command sets itself (agent, budget, --train-arg) is the cell's own
+    pe.check_config_unchanged(trained, [*cmd, "--policy.optimizer_lr=1e-4"], config, tmp_path)
+    pe.check_config_unchanged({**trained, "optimizer_lr": 3e-4}, cmd, config, tmp_path)
