@@ -324,6 +324,8 @@ class EFMAgent(nn.Module, abc.ABC):
         steps, solver = cfg.rl_target_inference_steps or cfg.num_inference_steps, cfg.rl_target_solver
         eps = torch.rand(cfg.num_critics, l_obs.shape[0], device=l_obs.device) * cfg.rl_goal_ratio
         bridge = target.critic.query(torch.cat([t_goal, t_rl_goal], -1), eps, steps, solver).amax(0)
+        if cfg.rl_bridge_floor is not None:  # a negative extrapolated bridge would lower the next minimum
+            bridge = bridge.clamp(min=cfg.rl_bridge_floor)
         stitched = distance + bridge
         if cfg.rl_target_cap is not None:  # keeps the bootstrap from feeding on a runaway critic
             stitched = stitched.clamp(max=cfg.rl_target_cap)

@@ -93,6 +93,11 @@ class EFMConfig(PreTrainedConfig):
         rl_target_cap: cap of eq. 5's target d + bridge, in units of ``max_goal_distance`` (None = uncapped, the
             paper's setting). The target feeds on the EMA critic's own output: uncapped, a short CPU run's
             cross-region estimates ran away to 10x the expert's steps (the reference's stay under ~2).
+        rl_bridge_floor: lower bound of the bridge Critic_ema(eps_g | g, g') in eq. 5, in units of
+            ``max_goal_distance`` (None = unbounded, the paper's setting; 0 = a time to the goal is never
+            negative). Integrated from eps near 0 the flow extrapolates below its data, and a bootstrap that adds
+            such a negative bridge teaches the next one a lower minimum: with r_g = 0.1 a 12k-step planar run
+            collapsed to -1300 steps on every evaluation pair (r_g = 0.3 hides this by inflating the targets).
         rl_actor_slack: FM-AC's actor and FM-PC's planner learn only from the bootstrap rows whose target
             d' <= (1 + slack) * Critic_ema(0 | o, g'), i.e. whose chunk is on a near-shortest route to g'; the
             critics still learn from every row (None = every row for all, the paper's setting). A short run's
@@ -161,6 +166,7 @@ class EFMConfig(PreTrainedConfig):
     rl_warmup_steps: int = 0
     rl_ramp_steps: int = 0
     rl_target_cap: float | None = None
+    rl_bridge_floor: float | None = None
     rl_actor_slack: float | None = None
     rl_target_solver: str = "euler"
     rl_target_inference_steps: int | None = None
@@ -243,6 +249,7 @@ class EFMConfig(PreTrainedConfig):
             "rl_warmup_steps": self.rl_warmup_steps >= 0,
             "rl_ramp_steps": self.rl_ramp_steps >= 0,
             "rl_target_cap": self.rl_target_cap is None or self.rl_target_cap > 0,
+            "rl_bridge_floor": self.rl_bridge_floor is None or self.rl_bridge_floor >= 0,
             "rl_actor_slack": self.rl_actor_slack is None or self.rl_actor_slack >= 0,
             "rl_target_solver": self.rl_target_solver in SOLVERS,
             "rl_target_inference_steps": self.rl_target_inference_steps is None

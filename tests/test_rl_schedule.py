@@ -71,9 +71,27 @@ def test_bootstrap_targets_are_capped(state_dataset, monkeypatch):
     assert torch.all(uncapped >= 5.0)
 
 
+def test_bootstrap_bridges_are_floored(state_dataset, monkeypatch):
+    """rl_bridge_floor keeps a negative (extrapolated) bridge from lowering eq. 5's target below d; None keeps
+    the paper's unbounded sum."""
+    policy, batch = _policy_and_batch(state_dataset, rl_bridge_floor=0.0)
+    critic = policy.ema_model.critic
+    monkeypatch.setattr(
+        critic, "query", lambda cond, eps, *_: torch.full((eps.shape[0], cond.shape[0]), -2.0)
+    )
+    d = batch["observation.goal_distance"].float()[:8] / policy.config.max_goal_distance
+    floored = policy.model.training_rows(batch, policy.ema_model).goal_conditioned.distance[-8:]
+    torch.testing.assert_close(floored, d)
+    policy.config.rl_bridge_floor = None
+    unbounded = policy.model.training_rows(batch, policy.ema_model).goal_conditioned.distance[-8:]
+    torch.testing.assert_close(unbounded, d - 2.0)
+
+
 def test_invalid_schedule_is_rejected():
     with pytest.raises(ValueError, match="rl_target_cap=0"):
         tiny_config("efm_ac", use_rl=True, rl_target_cap=0.0)
+    with pytest.raises(ValueError, match="rl_bridge_floor=-0.5"):
+        tiny_config("efm_ac", use_rl=True, rl_bridge_floor=-0.5)
     with pytest.raises(ValueError, match="rl_warmup_steps=-1"):
         tiny_config("efm_ac", use_rl=True, rl_warmup_steps=-1)
     with pytest.raises(ValueError, match="rl_ramp_steps=-3"):
