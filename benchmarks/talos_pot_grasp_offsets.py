@@ -102,7 +102,8 @@ def to_markdown(report: dict) -> str:
         f"The operator's pot grasp from the reset state, with one imperfection at a time; the closure is the measured "
         f"gripper opening (0 open, 1 closed) 10 and {CLOSE_FRAMES} frames after the close command (25 Hz); then a "
         f"{LIFT * 100:.0f} cm lift. Weld frame: frames after the close command until the weld-on-contact grasp "
-        "engaged (0: already during the approach). The handle bar runs along x (13 cm, radius 9 mm).",
+        "engaged (0: already during the approach). "
+        f"The handle bar runs along x ({200 * report['pot_handle_half_length']:.0f} cm, radius 9 mm).",
         "",
         f"| grasp | weld frame | closure at 10 / {CLOSE_FRAMES} frames | pot rise (m) | held after the lift |",
         "|---|---:|---|---:|---|",
@@ -119,9 +120,20 @@ def to_markdown(report: dict) -> str:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/talos_pot_grasp_offsets"))
+    ap.add_argument(
+        "--pot-handle-half-length",
+        type=float,
+        default=None,
+        help="m; builds the kitchen with pot handle bars of this half length (default: the scene's)",
+    )
     args = ap.parse_args(argv)
     os.environ.setdefault("MUJOCO_GL", "egl")
+    from lerobot_efm.envs.talos_kitchen import scene
     from lerobot_efm.envs.talos_kitchen.env import TalosKitchenEnv
+
+    if args.pot_handle_half_length is not None:  # before the first build: the model is cached per process
+        scene.POT_HANDLE_HALF_LENGTH = args.pot_handle_half_length
+    bar = f" --pot-handle-half-length {args.pot_handle_half_length}" if args.pot_handle_half_length else ""
 
     env = TalosKitchenEnv(image_size=32)
     t0 = time.perf_counter()
@@ -131,7 +143,8 @@ def main(argv: list[str] | None = None) -> None:
         print(trials[-1], flush=True)
     env.close()
     report = {
-        "command": f"python benchmarks/talos_pot_grasp_offsets.py --out {args.out}",
+        "command": f"python benchmarks/talos_pot_grasp_offsets.py --out {args.out}{bar}",
+        "pot_handle_half_length": scene.POT_HANDLE_HALF_LENGTH,
         "trials": trials,
         "seconds": time.perf_counter() - t0,
     }
