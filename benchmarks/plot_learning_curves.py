@@ -34,6 +34,13 @@ def number_spelling(value: str) -> str:
     return f"{number:g}"
 
 
+def _differs(value, baseline) -> bool:
+    """Numbers compare by value (1e-3 == 0.001), other settings by their spelling."""
+    if isinstance(baseline, (int, float)):
+        return float(value) != baseline
+    return str(value) != str(baseline)
+
+
 def overrides_name(train_args: list[str], policy_config: dict | None = None, config: str = "") -> str:
     """``['--policy.state_encoder=fourier']`` -> ``'state_encoder=fourier'``: what set a run apart, sorted by name;
     plus every value of the cell's resolved ``policy_config`` that departs from the value its config held when
@@ -44,7 +51,7 @@ def overrides_name(train_args: list[str], policy_config: dict | None = None, con
         named[name] = f"{name}={number_spelling(value)}" if sep else name
     for key, baseline in LABEL_BASELINES.get(config, {}).items():
         resolved = (policy_config or {}).get(key)
-        if key not in named and resolved is not None and float(resolved) != baseline:
+        if key not in named and resolved is not None and _differs(resolved, baseline):
             named[key] = f"{key}={number_spelling(str(resolved))}"
     return " ".join(named[name] for name in sorted(named))
 

@@ -483,6 +483,18 @@ def test_seed_means_groups_seeds_of_one_setting(tmp_path):
         "planar_push_efm_cpu 12k steps",
         "planar_push_efm_cpu optimizer_lr=3e-4 rl_actor_slack=0.2 12k steps",
     ]
+    # a setting that is not a number (the state encoder) departs from its baseline by spelling
+    encoders = []
+    for name, encoder in (("fourier.json", "fourier"), ("raw.json", "identity")):
+        payload = json.loads(resolved_run(name, 0.0001).read_text())
+        payload["config"] = "train_configs/ogbench_pointmaze_efm_cpu.json"
+        payload["cells"][0]["policy_config"]["state_encoder"] = encoder
+        (tmp_path / name).write_text(json.dumps(payload))
+        encoders.append(tmp_path / name)
+    assert [c["setting"] for c in means.load_cells(encoders, False)] == [
+        "ogbench_pointmaze_efm_cpu state_encoder=fourier 12k steps",
+        "ogbench_pointmaze_efm_cpu 12k steps",
+    ]
     table = means.main(reports)
     assert "| 20 / 30 | 25.0 ± 7.1 | 20 / 40 | 30.0 ± 14.1 | 50 / 50 | 50.0 ± 0.0 |" in table
     assert "| 60 | 60.0 |" in table
