@@ -133,7 +133,11 @@ def main(argv: list[str] | None = None) -> None:
 
     if args.pot_handle_half_length is not None:  # before the first build: the model is cached per process
         scene.POT_HANDLE_HALF_LENGTH = args.pot_handle_half_length
-    bar = f" --pot-handle-half-length {args.pot_handle_half_length}" if args.pot_handle_half_length else ""
+    bar = (
+        ""
+        if args.pot_handle_half_length is None
+        else f" --pot-handle-half-length {args.pot_handle_half_length}"
+    )
 
     env = TalosKitchenEnv(image_size=32)
     t0 = time.perf_counter()
