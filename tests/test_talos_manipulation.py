@@ -88,14 +88,13 @@ def test_pot_pick_and_place_on_table():
     assert primitives.welded(data, h) is None
 
 
-def test_off_centre_pot_grasp_holds_at_the_closure_of_a_centred_one():
-    """2 cm along the handle bar from its centre the grasp carries the pot and reads the closure of a centred
-    grasp (~0.2-0.45). On the old 13 cm bar the jaws slid off its end and closed to ~1.0 (what the operator's
-    misses read), so policies that grasped off-centre learned to re-open a held pot."""
+def test_off_centre_pot_grasp_holds_and_reads_a_high_closure():
+    """1.5 cm along the handle bar from its centre the grasp still carries the pot, but its closure reads like a
+    miss at the centre would (> 0.6, the centre: ~0.44): what the play operator's spread grasps show policies."""
     model, data, h, ctrl = _setup()
     closures = []
     last = None
-    for command in primitives.pot_pick_place(data, h, primitives.home_command(), (0.45, -0.34), along=-0.02):
+    for command in primitives.pot_pick_place(data, h, primitives.home_command(), (0.45, -0.34), along=-0.015):
         ctrl.step(data, command)
         last = command
         if primitives.welded(data, h) == "pot":
@@ -104,9 +103,9 @@ def test_off_centre_pot_grasp_holds_at_the_closure_of_a_centred_one():
         ctrl.step(data, last)
     p1, _ = scene.pot_pose(data, h)
     assert np.linalg.norm(p1[:2] - [0.45, -0.34]) < 0.04
-    assert len(closures) > 50 and np.median(closures) < 0.55, np.median(closures)
-    with pytest.raises(ValueError, match="along=0.1"):
-        scene.pot_handle_pos(data, h, "left", 0.1)
+    assert len(closures) > 50 and np.median(closures) > 0.6, np.median(closures)
+    with pytest.raises(ValueError, match="along=0.07"):
+        scene.pot_handle_pos(data, h, "left", 0.07)
 
 
 def test_pot_onto_pulled_out_tray():

@@ -82,7 +82,7 @@ def test_play_moves_door_tray_and_pot(env):
     # Two operators (seeds 3 and 4), two 3000-step episodes each: whether one seed's 6000 steps put the pot on the
     # tray is a chance event that floating-point details of the CPU decide (seed 4 did on one machine, not on
     # another); together they cover every task state on both.
-    visits, stats, moved = {}, [], []
+    visits, stats = {}, []
     for seed in (3, 4):
         env.reset(seed=0)
         op = play.TalosPlayOperator(env, np.random.default_rng(seed))
@@ -93,13 +93,11 @@ def test_play_moves_door_tray_and_pot(env):
                 env.advance(op.act(None))
                 states.append(op.read_state()[3])
         s = np.array(states, dtype=float)
-        assert np.linalg.norm(s[:, 2:5] - s[0, 2:5], axis=1).max() > 0.1  # every operator moves the pot
+        assert s[:, 0].min() < -0.9 and s[:, 1].min() < -0.2
+        assert np.linalg.norm(s[:, 2:5] - s[0, 2:5], axis=1).max() > 0.1
         for name, c in play.coverage(s).items():
             visits[name] = visits.get(name, 0) + c["visits"]
         stats.append(op.stats)
-        moved.append(s)
-    s = np.concatenate(moved)  # whether one seed draws a tray pull in 6000 steps is chance, as above
-    assert s[:, 0].min() < -0.9 and s[:, 1].min() < -0.2
     for name in ("door_open", "door_closed", "tray_out", "tray_in", "pot_home", "pot_moved", "pot_on_tray"):
         assert visits[name] >= 1, (name, visits)
     for st in stats:
@@ -130,9 +128,7 @@ def _pot_grasp_points(env, monkeypatch, n, **kwargs):
 def test_pot_grasps_spread_along_the_handle_bar(env, monkeypatch):
     along = _pot_grasp_points(env, monkeypatch, 40, pot_grasp_spread=0.025)
     assert len(along) == 40 and np.abs(along).max() <= 0.025
-    assert (
-        along.std() > 0.01 and (along < -0.01).sum() >= 5
-    )  # off-centre grasps (on the 13 cm bar: closures like misses)
+    assert along.std() > 0.01 and (along < -0.01).sum() >= 5  # the held grasps that read a high closure
     assert not _pot_grasp_points(env, monkeypatch, 5).any()  # default: at the bar's centre
-    with pytest.raises(ValueError, match="pot_grasp_spread=0.08"):
-        play.TalosPlayOperator(env, np.random.default_rng(0), pot_grasp_spread=0.08)
+    with pytest.raises(ValueError, match="pot_grasp_spread=0.06"):
+        play.TalosPlayOperator(env, np.random.default_rng(0), pot_grasp_spread=0.06)

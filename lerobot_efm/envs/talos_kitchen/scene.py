@@ -45,7 +45,7 @@ dexterous workspace (checked with the IK):
   across the arm's path). Vertical box-section bar handle at (0.61, 0.35, 0.80) when in
   (:func:`tray_handle_pos`); grasped with fingers pitched 0.8 rad down (horizontal fingers cannot
   reach z 0.80). Tray floor top at z = 0.75 m.
-* a **red pot** (free joint ``pot_free``, hollow, 0.17 m diameter, ~0.8 kg) with two 18 cm bar
+* a **red pot** (free joint ``pot_free``, hollow, 0.17 m diameter, ~0.8 kg) with two 13 cm bar
   handles on +-y (:func:`pot_handle_pos`), standing on the table at :data:`POT_HOME` (0.42, -0.16);
 * one fixed external RGB camera ``front`` framing the robot and the kitchen.
 
@@ -131,9 +131,7 @@ TRAY_POS0 = (
 )  # tray body origin when pushed in  # tray handle bar centre in the tray frame
 POT_RADIUS = 0.085
 POT_HEIGHT = 0.10
-POT_HANDLE_HALF_LENGTH = 0.09  # m, half the length of each handle bar (along the pot's x axis): 18 cm bars
-# hold a grasp up to 3 cm off the centre at the closure of a centred one (13 cm bars read 0.6-1.0 there,
-# like a miss: benchmarks/results/talos_pot_grasp_offsets_bar18cm.md)
+POT_HANDLE_HALF_LENGTH = 0.065  # m, half the length of each handle bar (along the pot's x axis)
 
 
 def talos_data_dir() -> Path:
