@@ -118,14 +118,36 @@ def table(results: list[dict], labels: list[str]) -> str:
     return "\n".join(lines)
 
 
+def pooled(results: list[dict]) -> list[dict]:
+    """One cell per (label, task): runs of the same cell on other seeds (``--extra=--seed=1010``) add their
+    episodes to it rather than replace it, so two 10-episode runs give one 20-episode rate."""
+    cells: dict[tuple[str, str], dict] = {}
+    for r in results:
+        key = (r["label"], r["task"])
+        if key not in cells:
+            cells[key] = {**r, "successes": list(r["successes"])}
+            continue
+        cell = cells[key]
+        if r["command"] in cell["command"].split("\n"):  # same seeds: the same episodes counted twice
+            raise ValueError(f"{key[0]}/{key[1]} is given twice with the same command: {r['command']}")
+        cell["command"] += "\n" + r["command"]
+        cell["successes"] += r["successes"]
+        cell["n_episodes"] += r["n_episodes"]
+        cell["pc_success"] = 100.0 * sum(cell["successes"]) / len(cell["successes"])
+        cell["seconds"] = None if None in (cell["seconds"], r["seconds"]) else cell["seconds"] + r["seconds"]
+    return list(cells.values())
+
+
 def merged_table(json_files: list[Path]) -> str:
-    """One table from several runs' JSON files (e.g. policies evaluated separately)."""
+    """One table from several runs' JSON files (policies, tasks or seeds evaluated separately)."""
     results, labels = [], []
     for f in json_files:
         run = json.loads(Path(f).read_text())
         results += run["results"]
         labels += [lab for lab in run["policies"] if lab not in labels]
-    return table(results, labels)
+    cells = pooled(results)
+    episodes = sorted({c["n_episodes"] for c in cells})
+    return table(cells, labels) + f"\n\nEpisodes per cell: {', '.join(map(str, episodes))}."
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -299,3 +299,27 @@ def test_suite_keeps_each_cells_time_and_names_a_partial_mean(tmp_path):
     assert suite.run_one("ac", str(ckpt), "open_door", args, tmp_path)["seconds"] == 754.2
     assert results[1]["seconds"] is None  # evaluated before cells kept their time: unknown, not 0
     assert "| **mean** | | 75% (2 tasks) |" in suite.table(results, ["ac"])
+
+
+def test_suite_merge_pools_runs_of_the_same_cell_on_other_seeds(tmp_path):
+    """`--merge` of two 10-episode runs of one policy (seeds 1000-1009 and 1010-1019) gives one 20-episode rate
+    per task, not the last run's; the same run given twice is refused instead of counted twice."""
+    import json
+
+    suite = _suite_module()
+
+    def run_file(name, seed, successes):
+        cell = {"label": "ac", "task": "store_pot", "n_episodes": len(successes), "seconds": 10.0}
+        cell |= {"pc_success": 100.0 * sum(successes) / len(successes), "successes": successes}
+        cell["command"] = f"lerobot-eval --env.task=store_pot --seed={seed}"
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({"policies": {"ac": "ckpt"}, "results": [cell]}))
+        return path
+
+    first = run_file("a", 1000, [True, False, False, False])
+    second = run_file("b", 1004, [True, True, True, False])
+    md = suite.merged_table([first, second])
+    assert "| **store_pot** (long) |" in md and "| 50% |" in md, md
+    assert "Episodes per cell: 8." in md
+    with pytest.raises(ValueError, match="store_pot is given twice"):
+        suite.merged_table([first, first])
