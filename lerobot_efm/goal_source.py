@@ -76,8 +76,12 @@ def set_image_shapes(shapes: dict[str, tuple[int, ...]]) -> None:
 
 def fit_live_images(observation: dict) -> dict:
     """Resize camera frames (``observation.images.*``, (C, H, W) or (B, C, H, W) floats) whose size differs from
-    the checkpoint's (a robot camera set to another resolution than the recording's), warning once per camera."""
-    for key, shape in _deploy["image_shapes"].items():
+    the checkpoint's (a robot camera set to another resolution than the recording's), warning once per camera.
+    A goal image that comes with the observation (``observation.goal.images.*``, e.g. from an env that renders
+    its goal at the camera's size) is resized the same way, so goal and camera match what training saw."""
+    shapes = dict(_deploy["image_shapes"])
+    shapes |= {GOAL_PREFIX + k.removeprefix(OBS_PREFIX): s for k, s in _deploy["image_shapes"].items()}
+    for key, shape in shapes.items():
         value = observation.get(key)
         if not isinstance(value, torch.Tensor) or tuple(value.shape[-2:]) == tuple(shape[-2:]):
             continue

@@ -237,21 +237,23 @@ def test_a_key_press_moves_a_goal_sequence_on_even_without_critic(state_dataset,
 
 
 def test_live_camera_frames_of_another_resolution_are_resized_once_warned(video_dataset, tmp_path, caplog):
+    """A camera at another resolution than the recording's is resized to the checkpoint's, and so is a goal image
+    that comes with the observation at that resolution (lerobot-eval on an env rendering at --env.image_size)."""
     path = checkpoint(video_dataset, tmp_path)
     policy, pre, _ = deploy(path)
-    goal = torch.rand(1, 3, 32, 32)
     with caplog.at_level(logging.WARNING):
         for _ in range(2):
             processed = pre(
                 {
                     "observation.state": torch.zeros(1, 2),
                     "observation.images.top": torch.rand(1, 3, 48, 64),
-                    "observation.goal.images.top": goal,
+                    "observation.goal.images.top": torch.rand(1, 3, 48, 64),
                     "observation.goal.state": torch.zeros(1, 2),
                 }
             )
     assert processed["observation.images.top"].shape == (1, 3, 32, 32)
-    assert sum("sends (3, 48, 64) frames" in r.message for r in caplog.records) == 1
+    assert processed["observation.goal.images.top"].shape == (1, 3, 32, 32)
+    assert sum("sends (3, 48, 64) frames" in r.message for r in caplog.records) == 2  # once per key
     assert policy.select_action(processed).shape == (1, 2)
 
 
