@@ -6,7 +6,8 @@
 # Uses the viewer of the installed rerun-sdk (0.33+: `rerun --headless --screenshot-to`): no browser and no
 # display needed, but a Vulkan or OpenGL driver is; on a headless Debian/Ubuntu machine the software one
 # (llvmpipe/lavapipe) is `apt-get install mesa-vulkan-drivers`. The layout is the blueprint stored in the
-# recording (RolloutLogger.blueprint() for lerobot-efm-log-rollouts): the first episode's tab, time cursor at the end.
+# recording (RolloutLogger.blueprint() for lerobot-efm-log-rollouts): the first episode's tab, time cursor at the end
+# (the recording is compacted first, into a temporary file, so that it is all loaded when the shot is taken).
 # The headless viewer renders 2 pixels per point; the png is scaled back to WIDTHxHEIGHT pixels (smaller file
 # for the README) with Pillow when the venv has it (FULL_RES=1 keeps the 2x image).
 # Env: RERUN (viewer binary; default .venv/bin/rerun, else rerun on PATH), RERUN_RENDERER (vulkan | gl),
@@ -35,7 +36,16 @@ runtime=$(mktemp -d)
 log=$runtime/viewer.log
 trap 'rm -rf "$runtime"' EXIT
 rm -f "$png"
-args=("$rrd" --headless --screenshot-to "$png" --window-size "$size" --port auto --hide-welcome-screen)
+# The viewer screenshots once its first frames are drawn, while a long recording is still loading (a 22 MB,
+# 4,853-chunk store_pot rollout showed step 365 of 878): compacted first (`rerun rrd optimize`: 153 chunks), it
+# loads at once and the cursor really is at the end.
+compact=$runtime/compact.rrd
+if ! "$rerun_bin" rrd optimize "$rrd" >"$compact" 2>"$runtime/optimize.log"; then
+    echo "error: 'rerun rrd optimize $rrd' failed; its log:" >&2
+    cat "$runtime/optimize.log" >&2
+    exit 1
+fi
+args=("$compact" --headless --screenshot-to "$png" --window-size "$size" --port auto --hide-welcome-screen)
 [[ -n ${RERUN_RENDERER:-} ]] && args+=(--renderer "$RERUN_RENDERER")
 # RUST_LOG=warn: info messages ("Loading ...", "Listening for gRPC ...") would show as toasts on the screenshot
 if ! XDG_RUNTIME_DIR=$runtime RUST_LOG=${RUST_LOG:-warn} timeout "${TIMEOUT:-180}" "$rerun_bin" "${args[@]}" >"$log" 2>&1 \
