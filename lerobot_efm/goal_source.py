@@ -70,8 +70,10 @@ def advance_deploy_goal_on_key() -> bool:
 
 
 def set_image_shapes(shapes: dict[str, tuple[int, ...]]) -> None:
-    """The (C, H, W) the policy's cameras were trained at: live frames of another size are resized to them."""
-    _deploy["image_shapes"], _deploy["warned"] = dict(shapes), set()
+    """The (C, H, W) the policy's cameras were trained at: live frames of another size are resized to them, and so
+    are goal images of those cameras that come with the observation (``observation.goal.images.*``)."""
+    goals = {GOAL_PREFIX + k.removeprefix(OBS_PREFIX): s for k, s in shapes.items()}
+    _deploy["image_shapes"], _deploy["warned"] = {**shapes, **goals}, set()
 
 
 def fit_live_images(observation: dict) -> dict:
@@ -79,9 +81,7 @@ def fit_live_images(observation: dict) -> dict:
     the checkpoint's (a robot camera set to another resolution than the recording's), warning once per camera.
     A goal image that comes with the observation (``observation.goal.images.*``, e.g. from an env that renders
     its goal at the camera's size) is resized the same way, so goal and camera match what training saw."""
-    shapes = dict(_deploy["image_shapes"])
-    shapes |= {GOAL_PREFIX + k.removeprefix(OBS_PREFIX): s for k, s in _deploy["image_shapes"].items()}
-    for key, shape in shapes.items():
+    for key, shape in _deploy["image_shapes"].items():
         value = observation.get(key)
         if not isinstance(value, torch.Tensor) or tuple(value.shape[-2:]) == tuple(shape[-2:]):
             continue
