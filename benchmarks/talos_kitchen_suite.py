@@ -30,12 +30,6 @@ EVAL_FLAG_PREFIXES = ("--policy.", "--env.", "--eval.")  # lerobot-eval flags pa
 SECONDS_FILE = "seconds.txt"  # next to a cell's eval_info.json: how long its lerobot-eval ran
 
 
-def num_subtasks(task: str) -> int:
-    """Objects whose state differs between the task's initial and goal state (door, tray, pot)."""
-    a, b = TASKS[task].initial, TASKS[task].goal
-    return int(a.door != b.door) + int(a.tray != b.tray) + int((a.pot_on, a.pot_xy) != (b.pot_on, b.pot_xy))
-
-
 def uses_images(checkpoint: str) -> bool:
     """Whether the checkpoint's policy reads a camera (its config's VISUAL input features)."""
     cfg = json.loads((Path(checkpoint) / "config.json").read_text())
@@ -59,7 +53,7 @@ def eval_command(
         f"--env.image_size={image_size}",
         # a state policy needs no camera: nothing rendered per step (~10x cheaper steps) but lerobot-eval's videos
         *([] if uses_images(checkpoint) else ["--env.obs_type=state"]),
-        f"--env.episode_length={steps_per_subtask * num_subtasks(task)}",
+        f"--env.episode_length={steps_per_subtask * TASKS[task].num_objects}",
         f"--eval.n_episodes={episodes}",
         "--eval.batch_size=1",
         "--policy.device=cpu",

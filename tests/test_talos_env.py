@@ -161,6 +161,20 @@ def test_all_cycles_through_suite():
         e.close()
 
 
+def test_default_episode_length_grows_with_the_objects_a_task_moves():
+    """lerobot-eval --env.task=store_pot without --env.episode_length must not cut the 3-object task at a 1-object
+    limit (it did: 600 steps, every store_pot rollout failed); an explicit limit is kept, a bad one refused."""
+    length = {
+        t: TalosKitchenEnvConfig(task=t).episode_length for t in ("open_door", "pot_to_tray", "store_pot")
+    }
+    assert length == {"open_door": 500, "pot_to_tray": 500, "store_pot": 1500}
+    assert TalosKitchenEnvConfig(task="close_door_pull_tray").episode_length == 1000
+    assert TalosKitchenEnvConfig(task="all").episode_length == 1500
+    assert TalosKitchenEnvConfig(task="store_pot", episode_length=70).gym_kwargs["max_episode_steps"] == 70
+    with pytest.raises(ValueError, match="episode_length must be >= 1, got 0"):
+        TalosKitchenEnvConfig(task="open_door", episode_length=0)
+
+
 def test_lerobot_factory_keys():
     cfg = TalosKitchenEnvConfig(task="all", image_size=SIZE, episode_length=50)
     assert EnvConfig.get_choice_class("talos_kitchen") is TalosKitchenEnvConfig

@@ -73,7 +73,8 @@ from .tasks import (
 )
 
 GYM_ID = "lerobot_efm/TalosKitchen-v0"
-DEFAULT_EPISODE_STEPS = 600  # 24 s at 25 Hz
+DEFAULT_EPISODE_STEPS = 600  # 24 s at 25 Hz: gym.make's limit
+STEPS_PER_OBJECT = 500  # 20 s at 25 Hz: lerobot-eval's default limit per object a task moves
 CONTROL_FPS = 25
 CAMERA = "front"
 # "state" drops the camera and the goal image: a state policy's evaluation then renders nothing per step
@@ -374,14 +375,18 @@ class TalosKitchenEnv(gym.Env):
 @EnvConfig.register_subclass("talos_kitchen")
 @dataclass
 class TalosKitchenEnvConfig(GoalEnvConfig):
-    """LeRobot config: ``--env.type=talos_kitchen --env.task=open_door`` (``all`` = whole suite)."""
+    """LeRobot config: ``--env.type=talos_kitchen --env.task=open_door`` (``all`` = whole suite).
+
+    ``episode_length`` None: :data:`STEPS_PER_OBJECT` per object the task moves (500 steps for open_door, 1500
+    for store_pot; ``all``: the longest task's), so that a long task is not cut off at a short task's limit.
+    """
 
     GYM_ID: ClassVar[str] = GYM_ID
     MODULE: ClassVar[str] = "lerobot_efm.envs.talos_kitchen.env"
 
     task: str | None = "open_door"
     fps: int = CONTROL_FPS
-    episode_length: int = DEFAULT_EPISODE_STEPS
+    episode_length: int | None = None
     image_size: int = 128
     randomize: bool = True
     render_mode: str = "rgb_array"
@@ -409,6 +414,10 @@ class TalosKitchenEnvConfig(GoalEnvConfig):
 
     def __post_init__(self):
         check_task(self.task)
+        if self.episode_length is None:
+            self.episode_length = episode_steps(self.task)
+        if self.episode_length < 1:
+            raise ValueError(f"--env.episode_length must be >= 1, got {self.episode_length}")
         if self.obs_type not in OBS_TYPES:
             raise ValueError(f"Unknown --env.obs_type={self.obs_type!r}; valid: {list(OBS_TYPES)}")
         if self.obs_type == "pixels_state":
@@ -426,6 +435,12 @@ class TalosKitchenEnvConfig(GoalEnvConfig):
             "obs_type": self.obs_type,
             "max_episode_steps": self.episode_length,
         }
+
+
+def episode_steps(task: str) -> int:
+    """The default episode limit of ``task`` (``all``: the longest of the suite)."""
+    names = TASK_NAMES if check_task(task) == ALL else (task,)
+    return STEPS_PER_OBJECT * max(TASKS[n].num_objects for n in names)
 
 
 if GYM_ID not in gym.registry:

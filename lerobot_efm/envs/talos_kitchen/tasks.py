@@ -83,6 +83,14 @@ class KitchenTask:
     goal: KitchenState
     description: str
 
+    @property
+    def num_objects(self) -> int:
+        """Objects whose state differs between the initial and the goal state (door, tray, pot)."""
+        a, b = self.initial, self.goal
+        return (
+            int(a.door != b.door) + int(a.tray != b.tray) + int((a.pot_on, a.pot_xy) != (b.pot_on, b.pot_xy))
+        )
+
 
 _closed = KitchenState()
 _open = KitchenState(door=DOOR_OPEN)
