@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
+from .augment import random_shift
 from .configuration_efm import (
     GOAL_DISTANCE_KEY,
     GOAL_PREFIX,
@@ -227,6 +228,14 @@ class EFMAgent(nn.Module, abc.ABC):
         merged = {OBS_PREFIX + k: torch.cat([batch[p + k] for p in prefixes]) for k in keys}
         return list(self.encoder(merged).split(batch[prefixes[0] + keys[0]].shape[0]))
 
+    def augment_images(self, batch: dict[str, Tensor], prefixes: tuple[str, ...]) -> dict[str, Tensor]:
+        """Training only: each observation and goal image shifted at random (``image_random_shift``)."""
+        pad = self.config.image_random_shift
+        if not (self.training and pad and self.encoder.image_keys):
+            return batch
+        shifted = {p + k: random_shift(batch[p + k], pad) for p in prefixes for k in self.encoder.image_keys}
+        return {**batch, **shifted}
+
     def critic_distance(
         self, obs: Tensor, goal: Tensor, num_steps: int | None = None, solver: str | None = None
     ) -> Tensor:
@@ -260,7 +269,7 @@ class EFMAgent(nn.Module, abc.ABC):
         n_rl = self.num_bootstrap_rows(batch["action"].shape[0], step)
         use_rl = n_rl > 0
         prefixes = (OBS_PREFIX, GOAL_PREFIX) + ((RL_GOAL_PREFIX,) if use_rl else ())
-        latents = self.encode(batch, prefixes)
+        latents = self.encode(self.augment_images(batch, prefixes), prefixes)
         l_obs, l_goal = latents[0], latents[1]
         actions = batch["action"]
         distance = batch[GOAL_DISTANCE_KEY].float() / cfg.max_goal_distance

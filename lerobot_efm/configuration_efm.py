@@ -138,6 +138,9 @@ class EFMConfig(PreTrainedConfig):
         mlp_hidden_dims: hidden layers of the MLP flows (critics, planner, world model).
         image_latent_dim, image_encoder_channels, image_encoder_hidden_dim, image_encoder_dropout: IMPALA-small
             encoder, one per camera.
+        image_random_shift: during training, shift every camera and goal image by up to this many pixels
+            (edges replicated, :mod:`lerobot_efm.augment`; 0 = off, the reference's setting). An image policy
+            trained on little play otherwise keys on exact pixel positions.
         state_encoder: "identity" (reference), "mlp" or "fourier" for vector observations; state_latent_dim
             for "mlp". "fourier" appends sin/cos(2^k pi x) for k < state_fourier_frequencies to each normalised
             coordinate (no parameters): a critic on raw positions reads a maze as open space for long.
@@ -196,6 +199,7 @@ class EFMConfig(PreTrainedConfig):
     image_encoder_channels: tuple[int, ...] = (16, 32, 32)
     image_encoder_hidden_dim: int = 512
     image_encoder_dropout: float = 0.2
+    image_random_shift: int = 0
     state_encoder: str = "identity"
     state_latent_dim: int = 128
     state_fourier_frequencies: int = 6
@@ -259,6 +263,7 @@ class EFMConfig(PreTrainedConfig):
             "critic_inference_steps": self.critic_inference_steps is None or self.critic_inference_steps >= 1,
             "actor_distance_scale": self.actor_distance_scale > 0.0,
             "state_fourier_frequencies": self.state_fourier_frequencies >= 0,
+            "image_random_shift": self.image_random_shift >= 0,
             "goal_advance_distance": self.goal_advance_distance >= 0.0,
             "goal_advance_key": self.goal_advance_key is None or bool(self.goal_advance_key.strip()),
             "n_action_steps": 1
