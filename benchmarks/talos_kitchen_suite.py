@@ -21,6 +21,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from lerobot_efm.envs.talos_kitchen.env import STEPS_PER_OBJECT
 from lerobot_efm.envs.talos_kitchen.tasks import LONG_TASK, TASK_NAMES, TASKS
 
 BIN = Path(sys.executable).parent
@@ -161,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--steps-per-subtask",
         type=int,
-        default=500,
+        default=STEPS_PER_OBJECT,
         help="episode limit per object to move (the scripted operator needs 210-420 control steps per sub-task)",
     )
     ap.add_argument("--jobs", type=int, default=2)
