@@ -4,7 +4,8 @@ Why: a goal-conditioned image policy trained on half an hour of play from one fi
 actions on exact pixel positions of the few trajectories it saw; shifting every training image by a few
 pixels (edges replicated) makes it match *what* is in the image rather than where each pixel sits, the way
 LeRobot's diffusion policy crops its images at random. Observation and goal images get independent shifts;
-inference sees the image unshifted.
+inference sees the image unshifted. Measured on the Talos kitchen (4 px at 64x64): no gain there
+(``benchmarks/results/talos_kitchen.md``), so it is off by default.
 """
 
 from __future__ import annotations

@@ -139,8 +139,8 @@ class EFMConfig(PreTrainedConfig):
         image_latent_dim, image_encoder_channels, image_encoder_hidden_dim, image_encoder_dropout: IMPALA-small
             encoder, one per camera.
         image_random_shift: during training, shift every camera and goal image by up to this many pixels
-            (edges replicated, :mod:`lerobot_efm.augment`; 0 = off, the reference's setting). An image policy
-            trained on little play otherwise keys on exact pixel positions.
+            (edges replicated, :mod:`lerobot_efm.augment`; 0 = off, the reference's setting). Talos image FM-AC
+            with 4: 14 % over 13 tasks (without, another play: 13 %; ``benchmarks/results/talos_kitchen.md``).
         state_encoder: "identity" (reference), "mlp" or "fourier" for vector observations; state_latent_dim
             for "mlp". "fourier" appends sin/cos(2^k pi x) for k < state_fourier_frequencies to each normalised
             coordinate (no parameters): a critic on raw positions reads a maze as open space for long.
