@@ -20,6 +20,7 @@ import torch
 from torch import Tensor, nn
 
 from .augment import random_shift
+from .auxiliary import AuxiliaryStateHead
 from .configuration_efm import (
     GOAL_DISTANCE_KEY,
     GOAL_PREFIX,
@@ -27,6 +28,7 @@ from .configuration_efm import (
     RL_GOAL_PREFIX,
     TRAJ_PREFIX,
     EFMConfig,
+    mirror_key,
 )
 from .flow import euler_integrate, flow_matching_loss, integrate, interpolate, sample_source
 from .networks import ConditionalUnet1d, EnsembleMLPFlow, ObservationEncoder
@@ -161,6 +163,7 @@ class TrainingRows:
     goal_free: Rows
     num_bootstrap: int = 0  # eq. (5) rows at the end of goal_conditioned
     distance_conditioned: Rows | None = None  # for the actor / planner on d, if not all of goal_conditioned
+    batch_latents: tuple[Tensor, Tensor] | None = None  # (l_o, l_g) of the batch's own rows, augmented
 
     def for_distance_conditioned(self) -> Rows:
         """Rows of the components conditioned on (o, g, d): FM-AC's actor, FM-PC's planner."""
@@ -175,7 +178,12 @@ class TrainingRows:
 class EFMAgent(nn.Module, abc.ABC):
     """Encoder + components of one agent; subclasses define ``losses`` and ``act``."""
 
-    def __init__(self, config: EFMConfig, rest_action: Tensor | None = None):
+    def __init__(
+        self,
+        config: EFMConfig,
+        rest_action: Tensor | None = None,
+        auxiliary_bounds: tuple[Tensor, Tensor] | None = None,
+    ):
         super().__init__()
         self.config = config
         obs = config.observation_features
@@ -200,6 +208,10 @@ class EFMAgent(nn.Module, abc.ABC):
         )
         if config.uses_critic:
             self.critic = Critic(2 * self.latent_dim, config.num_critics, config.mlp_hidden_dims)
+        if config.auxiliary_state_key:  # training only: see lerobot_efm.auxiliary
+            self.auxiliary_head = AuxiliaryStateHead(
+                self.latent_dim, config.auxiliary_state_dim, *(auxiliary_bounds or ())
+            )
         self.build_components(self.latent_dim, self.action_dim)
 
     @abc.abstractmethod
@@ -302,7 +314,7 @@ class EFMAgent(nn.Module, abc.ABC):
         goal_free = rows
 
         if not use_rl:
-            return TrainingRows(rows, goal_free)
+            return TrainingRows(rows, goal_free, batch_latents=(l_obs, l_goal))
         head = {k: v[:n_rl] for k, v in batch.items() if isinstance(v, Tensor)}
         boot, near_shortest = self.bootstrap_rows(
             head,
@@ -314,7 +326,7 @@ class EFMAgent(nn.Module, abc.ABC):
             None if obs_traj is None else obs_traj[:n_rl],
         )
         distance_conditioned = None if near_shortest is None else rows.cat(boot.select(near_shortest))
-        return TrainingRows(rows.cat(boot), goal_free, n_rl, distance_conditioned)
+        return TrainingRows(rows.cat(boot), goal_free, n_rl, distance_conditioned, (l_obs, l_goal))
 
     @torch.no_grad()
     def bootstrap_rows(
@@ -357,7 +369,13 @@ class EFMAgent(nn.Module, abc.ABC):
         """``step``: updates done so far (the RL warm-up and ramp read it; None = RL fully on)."""
         rows = self.training_rows(batch, target, step)
         losses = self.losses(rows)
-        total = sum(self.config.critic_loss_weight * v if k == "critic" else v for k, v in losses.items())
+        if self.config.auxiliary_state_key:
+            losses["auxiliary_state"] = self.auxiliary_state_loss(batch, rows.batch_latents)
+        weights = {
+            "critic": self.config.critic_loss_weight,
+            "auxiliary_state": self.config.auxiliary_state_weight,
+        }
+        total = sum(weights.get(k, 1.0) * v for k, v in losses.items())
         info = {f"loss_{k}": v.item() for k, v in losses.items()}
         info["rows"] = float(rows.goal_conditioned.obs.shape[0])
         n_rl = rows.num_bootstrap
@@ -369,6 +387,12 @@ class EFMAgent(nn.Module, abc.ABC):
             kept = rows.for_distance_conditioned().obs.shape[0] - (rows.goal_conditioned.obs.shape[0] - n_rl)
             info["rl_actor_rows"] = float(kept)
         return total, info
+
+    def auxiliary_state_loss(self, batch: dict[str, Tensor], latents: tuple[Tensor, Tensor]) -> Tensor:
+        """The recorded ``auxiliary_state_key`` of the observation and of the goal, regressed from their latents."""
+        key = self.config.auxiliary_state_key
+        state = torch.cat([batch[key], batch[mirror_key(key, GOAL_PREFIX)]])
+        return self.auxiliary_head.loss(torch.cat(latents), state)
 
     # --- inference ---------------------------------------------------------------------------------
     @abc.abstractmethod
@@ -534,5 +558,9 @@ class FMAS(EFMAgent):
 AGENTS: dict[str, type[EFMAgent]] = {"gc": FMGC, "ac": FMAC, "pc": FMPC, "ps": FMPS, "as": FMAS}
 
 
-def make_agent(config: EFMConfig, rest_action: Tensor | None = None) -> EFMAgent:
-    return AGENTS[config.agent](config, rest_action)
+def make_agent(
+    config: EFMConfig,
+    rest_action: Tensor | None = None,
+    auxiliary_bounds: tuple[Tensor, Tensor] | None = None,
+) -> EFMAgent:
+    return AGENTS[config.agent](config, rest_action, auxiliary_bounds)

@@ -141,6 +141,11 @@ class EFMConfig(PreTrainedConfig):
         image_random_shift: during training, shift every camera and goal image by up to this many pixels
             (edges replicated, :mod:`lerobot_efm.augment`; 0 = off, the reference's setting). Talos image FM-AC
             with 4: 14 % over 13 tasks (without, another play: 13 %; ``benchmarks/results/talos_kitchen.md``).
+        auxiliary_state_key: a recorded ``observation.*`` vector that is *not* an input (e.g. a simulator's
+            ``observation.environment_state``), regressed from the latent of every observation and goal during
+            training (:mod:`lerobot_efm.auxiliary`): it tells an image encoder what to look for. None = off (the
+            reference). auxiliary_state_weight: its loss weight; auxiliary_state_dim: its size, read from the
+            dataset statistics when training starts and saved with the checkpoint.
         state_encoder: "identity" (reference), "mlp" or "fourier" for vector observations; state_latent_dim
             for "mlp". "fourier" appends sin/cos(2^k pi x) for k < state_fourier_frequencies to each normalised
             coordinate (no parameters): a critic on raw positions reads a maze as open space for long.
@@ -200,6 +205,9 @@ class EFMConfig(PreTrainedConfig):
     image_encoder_hidden_dim: int = 512
     image_encoder_dropout: float = 0.2
     image_random_shift: int = 0
+    auxiliary_state_key: str | None = None
+    auxiliary_state_weight: float = 1.0
+    auxiliary_state_dim: int = 0
     state_encoder: str = "identity"
     state_latent_dim: int = 128
     state_fourier_frequencies: int = 6
@@ -264,6 +272,13 @@ class EFMConfig(PreTrainedConfig):
             "actor_distance_scale": self.actor_distance_scale > 0.0,
             "state_fourier_frequencies": self.state_fourier_frequencies >= 0,
             "image_random_shift": self.image_random_shift >= 0,
+            "auxiliary_state_key": self.auxiliary_state_key is None
+            or (
+                self.auxiliary_state_key.startswith(OBS_PREFIX)
+                and not is_mirror_key(self.auxiliary_state_key)
+            ),
+            "auxiliary_state_weight": self.auxiliary_state_weight >= 0.0,
+            "auxiliary_state_dim": self.auxiliary_state_dim >= 0,
             "goal_advance_distance": self.goal_advance_distance >= 0.0,
             "goal_advance_key": self.goal_advance_key is None or bool(self.goal_advance_key.strip()),
             "n_action_steps": 1
@@ -340,6 +355,12 @@ class EFMConfig(PreTrainedConfig):
                 raise ValueError(f"Vector feature {key!r} must have shape (D,), got {ft.shape}.")
         if "action" not in self.output_features:
             raise ValueError("EFM policies need an 'action' output feature; the dataset/env provides none.")
+        if self.auxiliary_state_key in obs:
+            raise ValueError(
+                f"auxiliary_state_key={self.auxiliary_state_key!r} is already an input of the policy; "
+                "the auxiliary loss is for a recorded vector the policy does not see (e.g. a camera policy's "
+                "observation.environment_state)."
+            )
 
     # --- LeRobot hooks -----------------------------------------------------------------------------
     @property

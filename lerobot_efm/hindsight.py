@@ -53,6 +53,7 @@ class HindsightSpec:
     observation_keys: tuple[str, ...] | None = None  # None: every observation.* feature of the dataset
     image_shapes: tuple[tuple[str, tuple[int, ...]], ...] = ()  # (key, (C, H, W)) the policy takes
     cache_frames: bool = False
+    auxiliary_keys: tuple[str, ...] = ()  # recorded vectors delivered for observation and goal, not encoded
 
     @classmethod
     def from_config(cls, config: EFMConfig) -> HindsightSpec:
@@ -69,6 +70,7 @@ class HindsightSpec:
             keys,
             tuple((k, tuple(f.shape)) for k, f in config.image_features.items()),
             config.cache_frames,
+            (config.auxiliary_state_key,) if config.auxiliary_state_key else (),
         )
 
     @property
@@ -86,6 +88,7 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
         features = meta.features
         available = [k for k in features if k.startswith(OBS_PREFIX) and not is_mirror_key(k)]
         keys = list(self.spec.observation_keys or available)
+        keys += [k for k in self.spec.auxiliary_keys if k not in keys]
         missing = [k for k in keys if k not in features]
         if missing:
             raise KeyError(

@@ -18,6 +18,7 @@ from lerobot.policies.pretrained import PreTrainedPolicy
 from torch import Tensor
 
 from .agents import EFMAgent, make_agent
+from .auxiliary import auxiliary_bounds
 from .configuration_efm import (
     GOAL_DISTANCE_KEY,
     GOAL_PREFIX,
@@ -55,7 +56,9 @@ class EFMPolicy(PreTrainedPolicy):
         config.validate_features()
         config.add_mirror_features()
         self.config = config
-        self.model: EFMAgent = make_agent(config, _normalized_rest_action(config, dataset_stats))
+        self.model: EFMAgent = make_agent(
+            config, _normalized_rest_action(config, dataset_stats), _auxiliary_bounds(config, dataset_stats)
+        )
         self.ema_model: EFMAgent = copy.deepcopy(self.model).requires_grad_(False).eval()
         self.register_buffer("ema_updates", torch.zeros((), dtype=torch.long))
         # deployment: the goal named by --policy.goal_* (none: clear any earlier policy's) for the pre-processor
@@ -152,6 +155,9 @@ class EFMPolicy(PreTrainedPolicy):
         for prefix in cfg.mirror_prefixes:
             for key in cfg.observation_features:
                 _require(batch, mirror_key(key, prefix), "training batch")
+        if cfg.auxiliary_state_key:
+            for key in (cfg.auxiliary_state_key, mirror_key(cfg.auxiliary_state_key, GOAL_PREFIX)):
+                _require(batch, key, "training batch (auxiliary_state_key)")
         action = _require(batch, "action", "training batch")
         expected = (cfg.action_traj_len, cfg.output_features["action"].shape[0])
         if action.dim() != 3 or tuple(action.shape[1:]) != expected:
@@ -301,6 +307,24 @@ def _to_control_rate(chunk: Tensor, stride: int, action_mode: str) -> Tensor:
     start, end = chunk[:, :-1, None], chunk[:, 1:, None]  # (B, L-1, 1, A)
     between = start + (end - start) * frac[None, None, :, None]
     return torch.cat([between.flatten(1, 2), chunk[:, -1:]], dim=1)
+
+
+def _auxiliary_bounds(config: EFMConfig, dataset_stats: dict | None) -> tuple[Tensor, Tensor] | None:
+    """min / max of the auxiliary target in the training recording; sets ``auxiliary_state_dim`` (saved with the
+    config) so that a checkpoint loads without the statistics."""
+    key = config.auxiliary_state_key
+    if key is None:
+        return None
+    if dataset_stats is None:
+        if config.auxiliary_state_dim < 1:
+            raise ValueError(
+                f"auxiliary_state_key={key!r} needs the dataset statistics (its size and range) or a checkpoint's "
+                "auxiliary_state_dim; neither was given."
+            )
+        return None  # a checkpoint: its saved buffers hold the range
+    low, high = auxiliary_bounds(key, dataset_stats)
+    config.auxiliary_state_dim = low.numel()
+    return low, high
 
 
 def _normalized_rest_action(config: EFMConfig, dataset_stats: dict | None) -> Tensor | None:

@@ -152,6 +152,34 @@ def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
     assert eval_one_episode(ckpt, tmp_path / "eval", "--env.obs_type=state")["overall"]["n_episodes"] == 1
 
 
+def test_image_config_trains_with_the_object_state_as_auxiliary_target(talos_play, tmp_path):
+    """The CPU image config with ``--policy.auxiliary_state_key``: lerobot-train learns the recorded object
+    state from the camera latent (logged loss), and lerobot-eval runs the checkpoint, which acts without it."""
+    out = tmp_path / "train"
+    proc = run(
+        BIN / "lerobot-train",
+        f"--config_path={PROJECT / 'train_configs' / 'talos_kitchen_efm_ac_image_cpu.json'}",
+        f"--dataset.repo_id={REPO}",
+        f"--dataset.root={talos_play}",
+        "--policy.auxiliary_state_key=observation.environment_state",
+        "--policy.max_goal_distance=60",
+        "--policy.mlp_hidden_dims=[32,32]",
+        "--policy.unet_down_dims=[8,16,16]",
+        "--policy.unet_n_groups=4",
+        "--policy.num_inference_steps=2",
+        "--steps=2",
+        "--batch_size=4",
+        "--save_freq=2",
+        "--log_freq=1",
+        f"--output_dir={out}",
+    )
+    assert "loss_auxiliary_state:" in proc.stdout + proc.stderr
+    ckpt = out / "checkpoints" / "last" / "pretrained_model"
+    cfg = json.loads((ckpt / "config.json").read_text())
+    assert cfg["auxiliary_state_dim"] == 9 and "observation.environment_state" not in cfg["input_features"]
+    assert eval_one_episode(ckpt, tmp_path / "eval")["overall"]["n_episodes"] == 1
+
+
 @pytest.mark.parametrize(
     "config_file", sorted(p.name for p in (PROJECT / "train_configs").glob("talos_kitchen_*.json"))
 )
