@@ -25,7 +25,9 @@ def _image_only_config(**overrides):
 
 def _batch(dataset, indices):
     items = [dataset[i] for i in indices]
-    return {k: torch.stack([it[k] for it in items]) for k, v in items[0].items() if isinstance(v, torch.Tensor)}
+    return {
+        k: torch.stack([it[k] for it in items]) for k, v in items[0].items() if isinstance(v, torch.Tensor)
+    }
 
 
 def test_hindsight_rows_carry_the_auxiliary_state_of_observation_and_goal(video_dataset):
