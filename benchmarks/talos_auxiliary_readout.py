@@ -47,7 +47,9 @@ def load(checkpoint: str):
     cfg = PreTrainedConfig.from_pretrained(checkpoint)
     cfg.device = "cpu"
     if not cfg.auxiliary_state_key:
-        raise ValueError(f"{checkpoint}: trained without --policy.auxiliary_state_key; it has no readout head")
+        raise ValueError(
+            f"{checkpoint}: trained without --policy.auxiliary_state_key; it has no readout head"
+        )
     policy = get_policy_class(cfg.type).from_pretrained(checkpoint, config=cfg).eval()
     pre, _ = make_pre_post_processors(policy_cfg=cfg, pretrained_path=checkpoint)
     return cfg, policy, pre
@@ -80,9 +82,13 @@ def readout(loaded, root: str, frames: int, batch: int = 64) -> tuple[np.ndarray
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--checkpoint", required=True)
-    parser.add_argument("--dataset", action="append", required=True, help="NAME=ROOT; the first is the training play")
+    parser.add_argument(
+        "--dataset", action="append", required=True, help="NAME=ROOT; the first is the training play"
+    )
     parser.add_argument("--frames", type=int, default=1000, help="evenly spaced frames read per recording")
     parser.add_argument("--out", type=Path, help="also write the table to this markdown file")
     args = parser.parse_args(argv)
@@ -116,7 +122,8 @@ def main(argv=None) -> None:
             *lines,
             "",
             "```",
-            "python benchmarks/talos_auxiliary_readout.py " + shlex.join(sys.argv[1:] if argv is None else argv),
+            "python benchmarks/talos_auxiliary_readout.py "
+            + shlex.join(sys.argv[1:] if argv is None else argv),
             "```",
         ]
     )

@@ -153,15 +153,15 @@ def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
 
 
 def test_image_config_trains_with_the_object_state_as_auxiliary_target(talos_play, tmp_path):
-    """The CPU image config with ``--policy.auxiliary_state_key``: lerobot-train learns the recorded object
-    state from the camera latent (logged loss), and lerobot-eval runs the checkpoint, which acts without it."""
+    """The shipped CPU image config (``auxiliary_state_key=observation.environment_state``): lerobot-train learns
+    the recorded object state from the camera latent (logged loss), and lerobot-eval runs the checkpoint, which
+    acts without it."""
     out = tmp_path / "train"
     proc = run(
         BIN / "lerobot-train",
         f"--config_path={PROJECT / 'train_configs' / 'talos_kitchen_efm_ac_image_cpu.json'}",
         f"--dataset.repo_id={REPO}",
         f"--dataset.root={talos_play}",
-        "--policy.auxiliary_state_key=observation.environment_state",
         "--policy.max_goal_distance=60",
         "--policy.mlp_hidden_dims=[32,32]",
         "--policy.unet_down_dims=[8,16,16]",
