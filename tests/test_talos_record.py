@@ -128,15 +128,11 @@ def test_train_and_eval_efm_ac_on_the_recording(talos_play, tmp_path):
     assert info["overall"]["n_episodes"] == 1 and 0.0 <= info["overall"]["pc_success"] <= 100.0
 
 
-def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
-    """The shipped state config trained by lerobot-train runs in lerobot-eval on ``--env.obs_type=state`` (what
-    benchmarks/talos_kitchen_suite.py uses for state policies: nothing rendered per step)."""
-    out = tmp_path / "train"
-    run(
-        BIN / "lerobot-train",
-        f"--config_path={PROJECT / 'train_configs' / 'talos_kitchen_efm_ac_state.json'}",
+def tiny_shipped_config_run(play: Path, out: Path) -> list[str]:
+    """lerobot-train flags that run a shipped Talos config for 2 steps on the test recording, small networks."""
+    return [
         f"--dataset.repo_id={REPO}",
-        f"--dataset.root={talos_play}",
+        f"--dataset.root={play}",
         "--policy.max_goal_distance=60",
         "--policy.mlp_hidden_dims=[32,32]",
         "--policy.unet_down_dims=[8,16,16]",
@@ -147,6 +143,17 @@ def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
         "--save_freq=2",
         "--log_freq=1",
         f"--output_dir={out}",
+    ]
+
+
+def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
+    """The shipped state config trained by lerobot-train runs in lerobot-eval on ``--env.obs_type=state`` (what
+    benchmarks/talos_kitchen_suite.py uses for state policies: nothing rendered per step)."""
+    out = tmp_path / "train"
+    run(
+        BIN / "lerobot-train",
+        f"--config_path={PROJECT / 'train_configs' / 'talos_kitchen_efm_ac_state.json'}",
+        *tiny_shipped_config_run(talos_play, out),
     )
     ckpt = out / "checkpoints" / "last" / "pretrained_model"
     assert eval_one_episode(ckpt, tmp_path / "eval", "--env.obs_type=state")["overall"]["n_episodes"] == 1
@@ -160,18 +167,7 @@ def test_image_config_trains_with_the_object_state_as_auxiliary_target(talos_pla
     proc = run(
         BIN / "lerobot-train",
         f"--config_path={PROJECT / 'train_configs' / 'talos_kitchen_efm_ac_image_cpu.json'}",
-        f"--dataset.repo_id={REPO}",
-        f"--dataset.root={talos_play}",
-        "--policy.max_goal_distance=60",
-        "--policy.mlp_hidden_dims=[32,32]",
-        "--policy.unet_down_dims=[8,16,16]",
-        "--policy.unet_n_groups=4",
-        "--policy.num_inference_steps=2",
-        "--steps=2",
-        "--batch_size=4",
-        "--save_freq=2",
-        "--log_freq=1",
-        f"--output_dir={out}",
+        *tiny_shipped_config_run(talos_play, out),
     )
     assert "loss_auxiliary_state:" in proc.stdout + proc.stderr
     ckpt = out / "checkpoints" / "last" / "pretrained_model"
