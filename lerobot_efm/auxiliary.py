@@ -16,9 +16,9 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from .processor_efm import CONSTANT_RANGE  # a constant dimension gets range 2 (centred), like the normaliser
+
 HIDDEN_DIM = 256
-# A dimension that never changes in the recording gets range 2 (centred, not divided by ~0), like the normaliser.
-CONSTANT_RANGE = 1e-6
 
 
 class AuxiliaryStateHead(nn.Module):
