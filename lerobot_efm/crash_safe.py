@@ -8,14 +8,21 @@ are handled by :mod:`lerobot_efm.recording`; this module covers the one that can
 * :func:`seal_episode_files` closes every file after each saved episode and continues in new ones, exactly as
   LeRobot's own ``LeRobotDataset.resume`` does (one data, metadata and video file per episode). Worst case: the
   episode being recorded is lost, and a kill during the few milliseconds of its save leaves debris behind.
+* LeRobot rewrites ``meta/info.json`` and ``stats.json`` (and ``tasks.parquet`` for a new task) in place at every
+  saved episode (truncate, then write), so a kill in that window leaves them empty. :func:`seal_episode_files` keeps a copy of the metadata
+  files as they were at the seal (``meta/last_sealed/``, written atomically); the writer removes it when the
+  dataset is finalized normally.
 * :func:`repair_dataset` removes that debris (files without a parquet footer, frames and videos no saved episode
-  refers to) and recomputes ``info.json`` and ``stats.json`` from the saved episodes' metadata. ``--resume=true``
-  runs it before appending.
+  refers to), restores unreadable metadata files from the copy and recomputes ``info.json`` and ``stats.json``
+  from the saved episodes' metadata. ``--resume=true`` runs it before appending.
 """
 
 from __future__ import annotations
 
+import json
 import logging
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +33,10 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 log = logging.getLogger(__name__)
 
+SEALED_COPY_DIR = "meta/last_sealed"  # the metadata files as they were at the last seal
+# the metadata files LeRobot rewrites in place (truncate, then write) when it saves an episode
+REWRITTEN_META_FILES = ("meta/info.json", "meta/stats.json", "meta/tasks.parquet")
+
 
 def seal_episode_files(dataset: LeRobotDataset) -> None:
     """Close the files the last episode went into (parquet footers written) and continue in fresh files."""
@@ -33,6 +44,56 @@ def seal_episode_files(dataset: LeRobotDataset) -> None:
     fresh = LeRobotDataset.resume(dataset.repo_id, root=dataset.root)
     dataset.meta, dataset.writer, dataset._is_finalized = fresh.meta, fresh.writer, False
     dataset.reader = None
+    keep_sealed_copy(dataset.root)
+
+
+def keep_sealed_copy(root: str | Path) -> None:
+    """Copy the metadata files LeRobot rewrites in place to :data:`SEALED_COPY_DIR` (each copy atomic: written
+    next to its target, then renamed), so that :func:`repair_dataset` can restore one a kill cut short."""
+    root = Path(root)
+    (root / SEALED_COPY_DIR).mkdir(parents=True, exist_ok=True)
+    for rel in REWRITTEN_META_FILES:
+        source = root / rel
+        if source.exists():
+            target = root / SEALED_COPY_DIR / source.name
+            shutil.copyfile(source, target.with_suffix(".tmp"))
+            os.replace(target.with_suffix(".tmp"), target)
+
+
+def drop_sealed_copy(root: str | Path) -> None:
+    """Remove the copy once the dataset is finalized normally (a finished dataset carries no extra files)."""
+    shutil.rmtree(Path(root) / SEALED_COPY_DIR, ignore_errors=True)
+
+
+def _readable_meta(path: Path) -> bool:
+    if path.suffix == ".parquet":
+        return _readable(path)
+    try:
+        json.loads(path.read_text())
+        return True
+    except (OSError, ValueError):  # empty or cut short by a kill mid-write
+        return False
+
+
+def _restore_unreadable_meta(root: Path) -> list[Path]:
+    """Put back, from the sealed copy, every rewritten metadata file that a kill left unreadable."""
+    restored = []
+    for rel in REWRITTEN_META_FILES:
+        path = root / rel
+        if not path.exists() or _readable_meta(path):
+            continue
+        copy = root / SEALED_COPY_DIR / path.name
+        if not copy.exists():
+            if path.name == "stats.json":  # recomputed from the episodes' metadata below
+                path.unlink()
+                restored.append(path)
+                continue
+            raise ValueError(
+                f"{path} is unreadable (a kill while LeRobot rewrote it) and {copy} holds no copy to restore"
+            )
+        shutil.copyfile(copy, path)
+        restored.append(path)
+    return restored
 
 
 def _readable(path: Path) -> bool:
@@ -47,6 +108,7 @@ def repair_dataset(root: str | Path) -> list[Path]:
     """Make the dataset at ``root`` consistent with its readable episode metadata after a hard kill; returns the
     files removed (only unreadable ones and frames/videos of episodes whose save never completed)."""
     root = Path(root)
+    restored = _restore_unreadable_meta(root)
     removed = [p for p in sorted(root.glob("meta/episodes/**/*.parquet")) if not _readable(p)]
     removed += [p for p in sorted(root.glob("data/**/*.parquet")) if not _readable(p)]
     for path in removed:
@@ -74,13 +136,14 @@ def repair_dataset(root: str | Path) -> list[Path]:
     removed += orphans
 
     frames = sum(int(r["length"]) for r in rows)
-    if removed or info.total_episodes != len(rows) or info.total_frames != frames:
+    if removed or restored or info.total_episodes != len(rows) or info.total_frames != frames:
         log.warning(
-            "repaired %s after an unfinished save: %d episodes, %d frames kept; removed %s",
+            "repaired %s after an unfinished save: %d episodes, %d frames kept; removed %s; restored %s",
             root,
             len(rows),
             frames,
             [str(p.relative_to(root)) for p in removed],
+            [str(p.relative_to(root)) for p in restored],
         )
         info.total_episodes, info.total_frames = len(rows), frames
         info.splits = {"train": f"0:{len(rows)}"}

@@ -28,7 +28,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.datasets.video_utils import VideoEncodingManager
 from lerobot.utils.utils import SuppressProgressBars
 
-from .crash_safe import repair_dataset, seal_episode_files
+from .crash_safe import drop_sealed_copy, keep_sealed_copy, repair_dataset, seal_episode_files
 
 GENERATOR_SEAL_INTERVAL_S = 30.0  # generators / converters: at most 30 s of their output lost to a SIGKILL
 _now = time.monotonic  # the sealing clock (a test steps it)
@@ -133,12 +133,13 @@ def open_dataset(
             raise ValueError(
                 f"Dataset at {root} was recorded at {ds.meta.fps} fps, the source runs at {fps} fps"
             )
+        keep_sealed_copy(root)
         return ds
     if root.exists():  # LeRobot would fail later with a bare mkdir error
         raise FileExistsError(
             f"Dataset root {root} already exists; pick a new root (lerobot-efm-record appends with --resume=true)"
         )
-    return LeRobotDataset.create(
+    dataset = LeRobotDataset.create(
         repo_id,
         fps=fps,
         features=features,
@@ -147,6 +148,8 @@ def open_dataset(
         use_videos=use_videos,
         metadata_buffer_size=1,
     )
+    keep_sealed_copy(root)  # a kill during the first save then still finds the features
+    return dataset
 
 
 def drop_unsaved_frames(dataset: LeRobotDataset) -> None:
@@ -185,6 +188,7 @@ class EpisodeWriter:
         try:
             drop_unsaved_frames(self.dataset)
             VideoEncodingManager(self.dataset).__exit__(exc_type, exc, tb)  # finalize + temporary images
+            drop_sealed_copy(self.dataset.root)
         finally:
             self.guard.__exit__()
         return False

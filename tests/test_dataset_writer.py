@@ -82,3 +82,24 @@ def test_an_existing_root_is_refused_by_name(tmp_path):
     (tmp_path / "ds").mkdir()
     with pytest.raises(FileExistsError, match="ds already exists"):
         EpisodeWriter.open(tmp_path / "ds", "local/x", 10, FEATURES)
+
+
+def test_a_kill_while_lerobot_rewrites_info_json_keeps_the_sealed_episodes(tmp_path):
+    """LeRobot rewrites meta/info.json and stats.json in place at every saved episode: a SIGKILL in that window
+    leaves them empty. The repair restores them from the copy kept at the last seal; a finished dataset keeps
+    no copy, and without one the unreadable file is named."""
+    root, snapshot = tmp_path / "ds", tmp_path / "killed"
+    with EpisodeWriter.open(root, "local/k", 10, FEATURES, use_videos=False) as writer:
+        for episode in range(3):
+            writer.write_episode(_frames(episode))
+        shutil.copytree(root, snapshot)
+    for name in ("info.json", "stats.json", "tasks.parquet"):  # truncated, then the kill before the write
+        (snapshot / "meta" / name).write_text("")
+    repair_dataset(snapshot)
+    killed = LeRobotDataset("local/k", root=snapshot)
+    assert killed.num_episodes == 3 and killed.num_frames == 30 and killed[29]["task"] == "play"
+    assert np.allclose(killed.meta.stats["observation.state"]["max"], 2.09)
+    assert not (root / "meta" / "last_sealed").exists()  # a normal finish leaves a plain LeRobot dataset
+    (root / "meta" / "info.json").write_text("")
+    with pytest.raises(ValueError, match="info.json is unreadable"):
+        repair_dataset(root)
