@@ -8,10 +8,10 @@ are handled by :mod:`lerobot_efm.recording`; this module covers the one that can
 * :func:`seal_episode_files` closes every file after each saved episode and continues in new ones, exactly as
   LeRobot's own ``LeRobotDataset.resume`` does (one data, metadata and video file per episode). Worst case: the
   episode being recorded is lost, and a kill during the few milliseconds of its save leaves debris behind.
-* LeRobot rewrites ``meta/info.json`` and ``stats.json`` (and ``tasks.parquet`` for a new task) in place at every
-  saved episode (truncate, then write), so a kill in that window leaves them empty. :func:`seal_episode_files` keeps a copy of the metadata
-  files as they were at the seal (``meta/last_sealed/``, written atomically); the writer removes it when the
-  dataset is finalized normally.
+* LeRobot rewrites ``meta/info.json`` and ``stats.json`` (and ``tasks.parquet`` for a new task) in place at
+  every saved episode (truncate, then write), so a kill in that window leaves them empty.
+  :func:`seal_episode_files` keeps a copy of those files as they were at the seal (``meta/last_sealed/``, written
+  atomically); the writer removes it when the dataset is finalized normally.
 * :func:`repair_dataset` removes that debris (files without a parquet footer, frames and videos no saved episode
   refers to), restores unreadable metadata files from the copy and recomputes ``info.json`` and ``stats.json``
   from the saved episodes' metadata. ``--resume=true`` runs it before appending.
@@ -76,7 +76,8 @@ def _readable_meta(path: Path) -> bool:
 
 
 def _restore_unreadable_meta(root: Path) -> list[Path]:
-    """Put back, from the sealed copy, every rewritten metadata file that a kill left unreadable."""
+    """Put back, from the sealed copy, every rewritten metadata file that a kill left unreadable (a
+    ``stats.json`` without a copy is removed instead: :func:`repair_dataset` recomputes it); returns them."""
     restored = []
     for rel in REWRITTEN_META_FILES:
         path = root / rel
@@ -84,7 +85,7 @@ def _restore_unreadable_meta(root: Path) -> list[Path]:
             continue
         copy = root / SEALED_COPY_DIR / path.name
         if not copy.exists():
-            if path.name == "stats.json":  # recomputed from the episodes' metadata below
+            if path.name == "stats.json":
                 path.unlink()
                 restored.append(path)
                 continue
@@ -138,7 +139,7 @@ def repair_dataset(root: str | Path) -> list[Path]:
     frames = sum(int(r["length"]) for r in rows)
     if removed or restored or info.total_episodes != len(rows) or info.total_frames != frames:
         log.warning(
-            "repaired %s after an unfinished save: %d episodes, %d frames kept; removed %s; restored %s",
+            "repaired %s after an unfinished save: %d episodes, %d frames kept; removed %s; rewritten %s",
             root,
             len(rows),
             frames,
