@@ -46,19 +46,24 @@ class SinusoidalTimeEmbedding(nn.Module):
 
 
 class TemporalConv1d(nn.Conv1d):
-    """``nn.Conv1d`` (same weights and state dict) whose small inference calls run as one GEMM over the
-    stacked shifted windows: PyTorch's CPU convolution takes up to 6x longer on the few time steps of a
-    single-observation action chunk. Training and large batches keep the regular convolution."""
+    """``nn.Conv1d`` (same weights and state dict) that runs as one GEMM over the stacked shifted windows
+    where PyTorch's CPU convolution is slow on the UNet's few time steps: every CPU training call (forward
+    plus backward 1.5x faster over the Talos UNet's layers, a state FM-AC update 1.2x:
+    ``benchmarks/bench_temporal_conv.py``) and small inference calls. CUDA training and large inference
+    batches keep the regular convolution."""
 
-    SMALL = 64  # batch x length below which the GEMM path is used
+    SMALL = 64  # inference: batch x length up to which the GEMM path is used
+    GEMM_FOR_CPU_TRAINING = True  # class switch, so a benchmark can time both paths
+
+    def uses_gemm(self, x: Tensor) -> bool:
+        if self.groups != 1 or self.dilation[0] != 1 or self.padding_mode != "zeros":
+            return False
+        if torch.is_grad_enabled():
+            return self.GEMM_FOR_CPU_TRAINING and x.device.type == "cpu"
+        return x.shape[0] * x.shape[-1] <= self.SMALL
 
     def forward(self, x: Tensor) -> Tensor:
-        if (
-            torch.is_grad_enabled()
-            or x.shape[0] * x.shape[-1] > self.SMALL
-            or self.groups != 1
-            or self.dilation[0] != 1
-        ):
+        if not self.uses_gemm(x):
             return super().forward(x)
         (k,), (stride,), (pad,) = self.kernel_size, self.stride, self.padding
         length = (x.shape[-1] + 2 * pad - k) // stride + 1

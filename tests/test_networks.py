@@ -258,4 +258,22 @@ def test_temporal_conv_gemm_path_equals_the_convolution(kernel, stride, padding,
     with torch.no_grad():
         fast = conv(x)
     assert torch.allclose(fast, torch.nn.Conv1d.forward(conv, x), atol=1e-5)
-    assert conv(x).requires_grad  # with gradients the regular convolution runs
+
+
+@pytest.mark.parametrize("kernel,stride,padding", [(3, 1, 1), (3, 2, 1), (1, 1, 0)])
+@pytest.mark.parametrize("length", [2, 8, 16])
+def test_temporal_conv_trains_on_the_cpu_through_the_gemm_path(kernel, stride, padding, length):
+    """CPU training runs the GEMM path (faster, bench_temporal_conv.py) with nn.Conv1d's outputs and gradients."""
+    from lerobot_efm.networks import TemporalConv1d
+
+    conv = TemporalConv1d(6, 5, kernel, stride=stride, padding=padding)
+    x = torch.randn(64, 6, length, requires_grad=True)
+    out = conv(x)
+    assert "Convolution" not in type(out.grad_fn).__name__  # the GEMM path, not the regular convolution
+    weights = torch.randn_like(out)
+    grads = torch.autograd.grad((out * weights).sum(), (x, conv.weight, conv.bias))
+    expected = torch.nn.Conv1d.forward(conv, x)
+    assert torch.allclose(out, expected, atol=1e-5)
+    expected_grads = torch.autograd.grad((expected * weights).sum(), (x, conv.weight, conv.bias))
+    for got, want in zip(grads, expected_grads, strict=True):
+        assert torch.allclose(got, want, atol=1e-4)
