@@ -8,7 +8,8 @@ Two measurements, both at ``--threads`` threads:
     forward + backward, ``--batch`` rows;
 (b) a whole ``lerobot-train`` update (bench_agents' ``measure_training``: forward, backward, clip, AdamW,
     scheduler, EMA; data loading excluded) of the shipped Talos train configs (``--configs``), each path
-    timed in alternation so both see the same machine load.
+    timed in alternation so both see the same machine load. The image config's auxiliary object-state head
+    is left out (it needs the recording's min/max); it adds one small MLP to the update.
 
 Run:  .venv/bin/python benchmarks/bench_temporal_conv.py --out benchmarks/results/bench_temporal_conv
 """
