@@ -240,6 +240,59 @@ def test_state_obs_type_renders_nothing_and_observes_the_same_states():
         TalosKitchenEnvConfig(task="open_door", obs_type="depth")
 
 
+def test_video_frames_are_rendered_every_kth_step_and_fresh_after_a_reset():
+    """``video_frame_stride=3``: of lerobot-eval's render() after the reset and every step, the frames of steps
+    0, 3, 6 are rendered and the two between repeat the last; the next episode starts with a fresh frame."""
+    e = TalosKitchenEnv(task="open_door", image_size=SIZE, obs_type="state", video_frame_stride=3)
+    real = e._render_renderer.render
+    calls = []
+    e._render_renderer.render = lambda data: calls.append(1) or real(data)
+    try:
+        obs, _ = e.reset(seed=0)
+        up = _hold(obs)
+        up[2] += 0.05  # raise the hand: every frame differs from the one before
+        frames = [e.render()]
+        for _ in range(6):
+            e.step(up)
+            frames.append(e.render())
+        assert len(calls) == 3
+        for i in (1, 2, 4, 5):
+            np.testing.assert_array_equal(frames[i], frames[i - i % 3])
+        for i in (3, 6):
+            assert np.abs(frames[i].astype(int) - frames[i - 3]).mean() > 0.01
+        np.testing.assert_array_equal(frames[6], real(e.data))  # the current scene
+        e.reset(seed=1)
+        np.testing.assert_array_equal(e.render(), real(e.data))
+        assert len(calls) == 4
+    finally:
+        e.close()
+
+
+def test_video_frame_reuses_the_observations_frame_of_the_same_scene(env, monkeypatch):
+    """A camera env renders the video frame at the observation's size: the observation's frame of the current
+    scene is returned instead of rendering it twice; a changed scene is rendered anew."""
+    real = env._renderer.render
+    calls = []
+    monkeypatch.setattr(env._renderer, "render", lambda data: calls.append(1) or real(data))
+    obs, _ = env.reset(seed=0)  # the goal image and the observation
+    assert len(calls) == 2
+    np.testing.assert_array_equal(env.render(), obs["pixels"]["front"])
+    obs, *_ = env.step(_hold(obs))
+    np.testing.assert_array_equal(env.render(), obs["pixels"]["front"])
+    assert len(calls) == 3
+    env.set_goal_scene()
+    np.testing.assert_array_equal(env.render(), obs["goal.images.front"])
+    assert len(calls) == 4
+
+
+def test_video_frame_stride_must_be_a_positive_integer():
+    with pytest.raises(ValueError, match="video_frame_stride must be an integer >= 1, got 0"):
+        TalosKitchenEnv(task="open_door", video_frame_stride=0)
+    with pytest.raises(ValueError, match="--env.video_frame_stride must be >= 1, got -2"):
+        TalosKitchenEnvConfig(task="open_door", video_frame_stride=-2)
+    assert TalosKitchenEnvConfig(task="open_door", video_frame_stride=5).gym_kwargs["video_frame_stride"] == 5
+
+
 def _suite_module():
     """benchmarks/talos_kitchen_suite.py, imported from its path (benchmarks/ is not a package)."""
     import importlib.util
@@ -266,6 +319,22 @@ def test_suite_evaluates_state_policies_without_a_camera(tmp_path):
         (tmp_path / name / "config.json").write_text(json.dumps({"input_features": feats}))
         cmd = suite.eval_command(str(tmp_path / name), "open_door", 2, 64, 500, tmp_path / "out", [])
         assert ("--env.obs_type=state" in cmd) is expected, cmd
+
+
+def test_suite_renders_a_video_frame_every_fifth_step_by_default(tmp_path):
+    """lerobot-eval's videos were 3/4 of the suite's time: the suite asks for a frame every 5th step unless told."""
+    import json
+
+    suite = _suite_module()
+    for argv, stride in (
+        (["--policy", "ac=ckpt"], 5),
+        (["--policy", "ac=ckpt", "--video-frame-stride=1"], 1),
+    ):
+        assert suite.parse_args(argv).video_frame_stride == stride
+    (tmp_path / "config.json").write_text(json.dumps({"input_features": {}}))
+    for stride, flags in ((5, ["--env.video_frame_stride=5"]), (1, [])):
+        cmd = suite.eval_command(str(tmp_path), "open_door", 2, 64, 500, tmp_path / "out", [], stride)
+        assert [c for c in cmd if "video_frame_stride" in c] == flags
 
 
 def test_suite_passes_lerobot_eval_flags_on_and_names_unknown_ones():

@@ -147,8 +147,9 @@ def tiny_shipped_config_run(play: Path, out: Path) -> list[str]:
 
 
 def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
-    """The shipped state config trained by lerobot-train runs in lerobot-eval on ``--env.obs_type=state`` (what
-    benchmarks/talos_kitchen_suite.py uses for state policies: nothing rendered per step)."""
+    """The shipped state config trained by lerobot-train runs in lerobot-eval on ``--env.obs_type=state`` with a
+    video frame every 4th step (what benchmarks/talos_kitchen_suite.py uses for state policies: nothing rendered
+    for the policy, few frames for the videos)."""
     out = tmp_path / "train"
     run(
         BIN / "lerobot-train",
@@ -156,7 +157,8 @@ def test_state_policy_evaluates_on_the_camera_free_env(talos_play, tmp_path):
         *tiny_shipped_config_run(talos_play, out),
     )
     ckpt = out / "checkpoints" / "last" / "pretrained_model"
-    assert eval_one_episode(ckpt, tmp_path / "eval", "--env.obs_type=state")["overall"]["n_episodes"] == 1
+    info = eval_one_episode(ckpt, tmp_path / "eval", "--env.obs_type=state", "--env.video_frame_stride=4")
+    assert info["overall"]["n_episodes"] == 1 and Path(info["overall"]["video_paths"][0]).stat().st_size > 0
 
 
 def test_image_config_trains_with_the_object_state_as_auxiliary_target(talos_play, tmp_path):

@@ -30,8 +30,13 @@ cmd_r11, cmd_r21`` (the command actually tracked: clipped position, Gram-Schmidt
 Environment state (9): ``door`` (rad, 0 closed, negative open), ``tray`` (m, 0 in, negative out),
 pot base centre ``pot_x, pot_y, pot_z`` and quaternion ``pot_qw, pot_qx, pot_qy, pot_qz``.
 
-``obs_type="state"`` leaves out ``pixels`` and the goal image (nothing rendered: state policies evaluate ~10x
-faster, rendering being most of a step's cost).
+``obs_type="state"`` leaves out ``pixels`` and the goal image (nothing rendered for the policy: a frame costs
+~25 ms on a CPU, whatever its size, against ~4 ms of physics per step).
+
+Video frames (:meth:`render`): ``lerobot-eval`` renders one after every step of its first 10 episodes, which
+was 3/4 of a state policy's evaluation time. ``video_frame_stride=k`` renders a new frame every k-th step since
+the reset and repeats it in between (videos at 25/k frames/s of content, same length); a frame of the current
+scene that the observation already rendered at the same size is reused instead of rendered twice.
 
 Goal observations are rendered by putting the scene in the goal state (set qpos, settle), reading
 image + state, then setting the initial state; they are cached per reset.
@@ -109,12 +114,22 @@ class TalosKitchenEnv(gym.Env):
         randomize: bool = True,
         terminate_on_success: bool = True,
         obs_type: str = "pixels_state",
+        video_frame_stride: int = 1,
     ):
         self.suite = check_task(task)
         if obs_type not in OBS_TYPES:
             raise ValueError(f"Unknown obs_type {obs_type!r}; valid: {list(OBS_TYPES)}")
         self.obs_type = obs_type
+        if int(video_frame_stride) != video_frame_stride or video_frame_stride < 1:
+            raise ValueError(f"video_frame_stride must be an integer >= 1, got {video_frame_stride!r}")
+        self.video_frame_stride = int(video_frame_stride)
         self._reset_count = 0
+        self._steps = 0  # steps since the reset
+        self._scene_version = 0  # bumped by every change of the physics state: which frames are current
+        self._obs_frame: tuple[int, np.ndarray] | None = None  # (scene version, camera frame) of the last obs
+        self._video_frame: tuple[tuple[int, int], np.ndarray] | None = (
+            None  # ((reset, step // stride), frame)
+        )
         self._set_current(TASK_NAMES[0] if task == ALL else task)
         if render_mode != "rgb_array":
             raise ValueError(f"render_mode must be 'rgb_array', got {render_mode!r}")
@@ -225,6 +240,7 @@ class TalosKitchenEnv(gym.Env):
             self.controller.step(d, hold)
         mujoco.mj_forward(m, d)  # observations consistent with qpos
         self._cmd = self._tracked(hold)
+        self._scene_version += 1
 
     def _mujoco(self):
         return self._mj
@@ -251,6 +267,7 @@ class TalosKitchenEnv(gym.Env):
         self._mujoco().mj_forward(self.model, d)
         self.controller.reset(d)
         self.controller.q_target = snap[7].copy()
+        self._scene_version += 1
 
     def set_goal_scene(self) -> None:
         """Put the scene exactly in this episode's (settled) goal state; for tests and demos."""
@@ -285,7 +302,9 @@ class TalosKitchenEnv(gym.Env):
             GOAL_ENV_STATE_KEY: self._goal_env.copy(),
         }
         if self.obs_type == "pixels_state":  # rendering is ~90 % of a step's cost: only when observed
-            obs["pixels"] = {CAMERA: self._renderer.render(self.data)}
+            frame = self._renderer.render(self.data)
+            self._obs_frame = (self._scene_version, frame)
+            obs["pixels"] = {CAMERA: frame.copy()}
             obs[GOAL_IMAGE_KEY] = self._goal_img.copy()
         return obs
 
@@ -321,6 +340,7 @@ class TalosKitchenEnv(gym.Env):
         else:
             name = self.suite
         self._reset_count += 1
+        self._steps = 0
         self._set_current(name)
         task = TASKS[name]
         initial, goal = self._jitter(task.initial), self._jitter(task.goal)
@@ -355,9 +375,22 @@ class TalosKitchenEnv(gym.Env):
         self.controller.step(self.data, cmd)
         self._mujoco().mj_forward(self.model, self.data)  # mj_step leaves kinematics one substep stale
         self._cmd = self._tracked(cmd)
+        self._steps += 1
+        self._scene_version += 1
 
     def render(self) -> np.ndarray:
-        return self._render_renderer.render(self.data)
+        """The video frame (``render_size``): a new one every ``video_frame_stride``-th step since the reset,
+        the observation's frame when it shows the current scene at this size (see the module docstring)."""
+        key = (self._reset_count, self._steps // self.video_frame_stride)
+        if self.video_frame_stride > 1 and self._video_frame is not None and self._video_frame[0] == key:
+            return self._video_frame[1].copy()
+        obs = self._obs_frame
+        if self._render_renderer is self._renderer and obs is not None and obs[0] == self._scene_version:
+            frame = obs[1].copy()
+        else:
+            frame = self._render_renderer.render(self.data)
+        self._video_frame = (key, frame)
+        return frame.copy()
 
     def close(self) -> None:
         for r in {
@@ -391,6 +424,8 @@ class TalosKitchenEnvConfig(GoalEnvConfig):
     randomize: bool = True
     render_mode: str = "rgb_array"
     obs_type: str = "pixels_state"  # "state": no camera, no goal image (faster evaluation of state policies)
+    # video frames: a new one every k-th step, repeated in between (lerobot-eval renders its first 10 episodes)
+    video_frame_stride: int = 1
     features: dict[str, PolicyFeature] = field(
         default_factory=lambda: {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(ACTION_DIM,)),
@@ -420,6 +455,8 @@ class TalosKitchenEnvConfig(GoalEnvConfig):
             raise ValueError(f"--env.episode_length must be >= 1, got {self.episode_length}")
         if self.obs_type not in OBS_TYPES:
             raise ValueError(f"Unknown --env.obs_type={self.obs_type!r}; valid: {list(OBS_TYPES)}")
+        if self.video_frame_stride < 1:
+            raise ValueError(f"--env.video_frame_stride must be >= 1, got {self.video_frame_stride}")
         if self.obs_type == "pixels_state":
             img = PolicyFeature(type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3))
             self.features[f"{OBS_IMAGES}.{CAMERA}"] = img
@@ -433,6 +470,7 @@ class TalosKitchenEnvConfig(GoalEnvConfig):
             "randomize": self.randomize,
             "render_mode": self.render_mode,
             "obs_type": self.obs_type,
+            "video_frame_stride": self.video_frame_stride,
             "max_episode_steps": self.episode_length,
         }
 
