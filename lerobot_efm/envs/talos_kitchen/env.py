@@ -127,9 +127,8 @@ class TalosKitchenEnv(gym.Env):
         self._steps = 0  # steps since the reset
         self._scene_version = 0  # bumped by every change of the physics state: which frames are current
         self._obs_frame: tuple[int, np.ndarray] | None = None  # (scene version, camera frame) of the last obs
-        self._video_frame: tuple[tuple[int, int], np.ndarray] | None = (
-            None  # ((reset, step // stride), frame)
-        )
+        # ((reset, step // stride), frame) of the last video frame
+        self._video_frame: tuple[tuple[int, int], np.ndarray] | None = None
         self._set_current(TASK_NAMES[0] if task == ALL else task)
         if render_mode != "rgb_array":
             raise ValueError(f"render_mode must be 'rgb_array', got {render_mode!r}")
@@ -386,7 +385,7 @@ class TalosKitchenEnv(gym.Env):
             return self._video_frame[1].copy()
         obs = self._obs_frame
         if self._render_renderer is self._renderer and obs is not None and obs[0] == self._scene_version:
-            frame = obs[1].copy()
+            frame = obs[1]  # never handed out: the observation and render() get copies
         else:
             frame = self._render_renderer.render(self.data)
         self._video_frame = (key, frame)
