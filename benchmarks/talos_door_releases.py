@@ -27,6 +27,28 @@ def scalars(rows: list[dict]) -> list[tuple[int, float]]:
     return [(r["step"], r["Scalars:scalars"][0]) for r in rows if r.get("Scalars:scalars") is not None]
 
 
+def rollouts_rrd(policy: str, task: str, episodes: int, seed: int) -> dict[str, list[dict]]:
+    """Roll ``policy`` out on a state Talos task with ``lerobot-efm-log-rollouts`` and read the ``.rrd`` back."""
+    from lerobot_efm.viz.rrd import read_rrd
+
+    with tempfile.TemporaryDirectory() as tmp:
+        rrd_path = Path(tmp) / "rollouts.rrd"
+        cmd = [
+            "lerobot-efm-log-rollouts",
+            f"--policy.path={policy}",
+            "--env.type=talos_kitchen",
+            f"--env.task={task}",
+            "--env.obs_type=state",
+            f"--eval.n_episodes={episodes}",
+            f"--seed={seed}",
+            "--render=false",
+            f"--output={rrd_path}",
+        ]
+        env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "HF_HUB_OFFLINE": "1"}
+        subprocess.run(cmd, check=True, env=env, capture_output=True)
+        return read_rrd(rrd_path)
+
+
 def episode_summary(rrd: dict, e: int, goal_door: float) -> dict:
     """Releases of the door handle (command falls under 0.5 while the door is held) and the state after."""
     door = dict(scalars(rrd[f"episode_{e}/objects/door"]))
@@ -61,25 +83,9 @@ def main() -> None:
     args = ap.parse_args()
 
     from lerobot_efm.envs.talos_kitchen.tasks import DOOR_TOL, TASKS
-    from lerobot_efm.viz.rrd import read_rrd
 
     goal_door = TASKS[args.task].goal.door
-    with tempfile.TemporaryDirectory() as tmp:
-        rrd_path = Path(tmp) / "rollouts.rrd"
-        cmd = [
-            "lerobot-efm-log-rollouts",
-            f"--policy.path={args.policy}",
-            "--env.type=talos_kitchen",
-            f"--env.task={args.task}",
-            "--env.obs_type=state",
-            f"--eval.n_episodes={args.episodes}",
-            f"--seed={args.seed}",
-            "--render=false",
-            f"--output={rrd_path}",
-        ]
-        env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "HF_HUB_OFFLINE": "1"}
-        subprocess.run(cmd, check=True, env=env, capture_output=True)
-        rrd = read_rrd(rrd_path)
+    rrd = rollouts_rrd(args.policy, args.task, args.episodes, args.seed)
     episodes = [episode_summary(rrd, e, goal_door) for e in range(args.episodes)]
     failures = [ep for ep in episodes if not ep["success"]]
     short = [ep for ep in failures if any(abs(d - goal_door) >= DOOR_TOL for d in ep["door_at_releases"])]
