@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -80,15 +81,15 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None, help="writes OUT.json and OUT.md")
     args = ap.parse_args()
 
+    from lerobot_efm.envs.talos_kitchen.tasks import POT_TOL
+
     rrd = rollouts_rrd(args.policy, args.task, args.episodes, args.seed)
     episodes = [episode_summary(rrd, e) for e in range(args.episodes)]
-    counts = {
-        k: sum(ep["outcome"] == k for ep in episodes) for k in dict.fromkeys(ep["outcome"] for ep in episodes)
-    }
+    counts = dict(Counter(ep["outcome"] for ep in episodes))
     lines = [
         f"# Pot placements: {args.task}, {args.episodes} episodes (seeds {args.seed}-{args.seed + args.episodes - 1})",
         "",
-        f"Policy `{args.policy}`; success: pot within 0.05 m of the goal pot (door and tray within theirs).",
+        f"Policy `{args.policy}`; success: pot within {POT_TOL} m of the goal pot (door and tray within theirs).",
         "",
         "| episode | outcome | steps | pot error at each release (m) | final xy error (m) | final dz (m) |",
         "|---:|---|---:|---|---:|---:|",
