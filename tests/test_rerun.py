@@ -211,13 +211,14 @@ def test_log_dataset_with_video(video_dataset_root, tmp_path):
 
 def talos_bounds_stats() -> dict[str, dict[str, np.ndarray]]:
     """MIN_MAX statistics from the talos_kitchen ranges (hand workspace box, rot6d in [-1, 1], gripper [0, 1],
-    door [-2, 0] rad, tray [-0.28, 0] m, pot inside the workspace, quaternion in [-1, 1]): an untrained policy
+    door [-2, 0] rad, tray [TRAY_STOP, 0] m, pot inside the workspace, quaternion in [-1, 1]): an untrained policy
     then commands poses all over the workspace instead of one point."""
     from lerobot_efm.envs.talos_kitchen.control import WORKSPACE_HIGH, WORKSPACE_LOW
+    from lerobot_efm.envs.talos_kitchen.tasks import TRAY_STOP
 
     pose_lo = np.concatenate([WORKSPACE_LOW, -np.ones(6), [0.0]]).astype(np.float32)
     pose_hi = np.concatenate([WORKSPACE_HIGH, np.ones(6), [1.0]]).astype(np.float32)
-    env_lo = np.concatenate([[-2.0, -0.28], WORKSPACE_LOW, -np.ones(4)]).astype(np.float32)
+    env_lo = np.concatenate([[-2.0, TRAY_STOP], WORKSPACE_LOW, -np.ones(4)]).astype(np.float32)
     env_hi = np.concatenate([[0.0, 0.0], WORKSPACE_HIGH, np.ones(4)]).astype(np.float32)
     return {
         "observation.state": {"min": np.tile(pose_lo, 2), "max": np.tile(pose_hi, 2)},

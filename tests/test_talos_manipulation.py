@@ -9,7 +9,7 @@ import pytest  # noqa: E402
 
 mujoco = pytest.importorskip("mujoco")
 
-from lerobot_efm.envs.talos_kitchen import control, primitives, scene  # noqa: E402
+from lerobot_efm.envs.talos_kitchen import control, primitives, scene, tasks  # noqa: E402
 
 
 def _setup():
@@ -110,12 +110,18 @@ def test_off_centre_pot_grasp_holds_and_reads_a_high_closure():
 
 def test_pot_onto_pulled_out_tray():
     model, data, h, ctrl = _setup()
-    last = primitives.execute(ctrl, data, primitives.tray_move(data, h, primitives.home_command(), -0.27))
-    assert scene.tray_slide(data, h) <= -0.25
+    last = primitives.execute(
+        ctrl, data, primitives.tray_move(data, h, primitives.home_command(), tasks.TRAY_OUT)
+    )
+    assert scene.tray_slide(data, h) <= tasks.TRAY_OUT + 0.02
     top = scene.TRAY_POS0[2] + 0.008
-    last = primitives.execute(ctrl, data, primitives.pot_pick_place(data, h, last, (0.47, 0.35), place_z=top))
+    dst = (
+        scene.TRAY_POS0[0] + tasks.TRAY_OUT + tasks.POT_TRAY_XY[0],
+        scene.TRAY_POS0[1] + tasks.POT_TRAY_XY[1],
+    )
+    last = primitives.execute(ctrl, data, primitives.pot_pick_place(data, h, last, dst, place_z=top))
     for _ in range(25):
         ctrl.step(data, last)
     p1, q1 = scene.pot_pose(data, h)
-    assert abs(p1[2] - top) < 0.01 and np.linalg.norm(p1[:2] - [0.47, 0.35]) < 0.04
+    assert abs(p1[2] - top) < 0.01 and np.linalg.norm(p1[:2] - dst) < 0.04
     assert _tilt_deg(q1) < 15.0

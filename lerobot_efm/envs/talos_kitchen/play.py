@@ -11,10 +11,10 @@ sub-task (weights :data:`WEIGHTS`, renormalised over the feasible ones):
 
 * ``open_door`` (tray in) / ``close_door`` (any tray): 80 % to the task state (open: U(-1.20, -1.08)
   rad, the hand pushes it back to about -1.1 on its way home; close: 0), 20 % partial (U(-0.9, -0.3));
-* ``pull_tray`` / ``push_tray`` (door closed, pot not on the tray): 80 % fully out (-0.28, the joint
-  stop, within ``TRAY_TOL`` of ``TRAY_OUT``; the tray stays there) / in, 20 % partial (U(-0.20, -0.08) m);
-* ``pot_to_tray`` (door closed, tray out, pot on the table): at ``POT_TRAY_XY`` + U(-1.5, 0) cm in x
-  (towards the robot, away from the slot walls), +- 1 cm in y;
+* ``pull_tray`` / ``push_tray`` (door closed, pot not on the tray): 80 % fully out (``TRAY_STOP``, the
+  joint stop, within ``TRAY_TOL`` of ``TRAY_OUT``; the tray stays there) / in, 20 % partial (U(-0.20, -0.08) m);
+* ``pot_to_tray`` (door closed, tray out, pot on the table): at ``POT_TRAY_XY`` +- 1 cm in x and y (inside
+  the window where a placed pot rests on the tray floor, see :mod:`.tasks`);
 * ``pot_to_table`` (door closed; from the tray or the table): 40 % home, 40 % moved (+- 1 cm), 20 % a
   random table point (table moves go to the other place than the current one);
 * ``wander`` (1-3 random free-space points, a smaller box near home when the door is open, random wrist yaw/pitch +- 0.4/0.3 rad, gripper <= 0.4) and
@@ -77,6 +77,7 @@ TRAY_TOP_Z = scene.TRAY_POS0[2] + 0.008  # pot base height when placed on the tr
 _TRAY_FLOOR = 0.009  # pot base above the tray body origin once settled (env.TRAY_FLOOR)
 _DOOR_CLOSED_MAX = -DOOR_TOL  # door angle above this counts as closed (tray may be operated)
 _TRAY_IN_MIN = -0.02
+_TRAY_OUT_RANGE = (tasks.TRAY_OUT - 0.005, tasks.TRAY_OUT + 0.005)  # start states with the tray out
 
 
 # ------------------------------------------------------------------------------------ state helpers
@@ -236,9 +237,9 @@ class TalosPlayOperator:
         if kind == 1:
             s = replace(s, door=float(r.uniform(-1.10, -1.05)))
         elif kind == 2:
-            s = replace(s, tray=float(r.uniform(-0.275, -0.265)))
+            s = replace(s, tray=float(r.uniform(*_TRAY_OUT_RANGE)))
         elif kind == 3:
-            s = KitchenState(tray=float(r.uniform(-0.275, -0.265)), pot_on="tray", pot_xy=tasks.POT_TRAY_XY)
+            s = KitchenState(tray=float(r.uniform(*_TRAY_OUT_RANGE)), pot_on="tray", pot_xy=tasks.POT_TRAY_XY)
         elif kind == 4:  # partial door or tray
             s = (
                 replace(s, door=float(r.uniform(-0.9, -0.25)))
@@ -301,9 +302,9 @@ class TalosPlayOperator:
         ok = {
             "open_door": tray_in and door > -0.95,
             "close_door": door < -0.05,
-            "pull_tray": closed and pot != "tray" and tray > -0.24,
+            "pull_tray": closed and pot != "tray" and tray > tasks.TRAY_OUT + 0.03,
             "push_tray": closed and pot != "tray" and tray < -0.03,
-            "pot_to_tray": closed and pot == "table" and tray < -0.25,
+            "pot_to_tray": closed and pot == "table" and tray < tasks.TRAY_OUT + 0.02,
             "pot_to_table": closed and pot in ("table", "tray"),
             "wander": True,
             "home": True,
@@ -438,7 +439,8 @@ class TalosPlayOperator:
         yield from P.tray_move(env.data, env.h, self._last, target)
 
     def _plan_pull_tray(self):
-        target, partial = self._target((-0.28, -0.28), (-0.20, -0.08))  # at the joint stop: it stays
+        stop = tasks.TRAY_STOP  # at the joint stop: it stays
+        target, partial = self._target((stop, stop), (-0.20, -0.08))
         goal = tasks.TRAY_OUT if not partial else target
         self._check = lambda: abs(self.read_state()[1] - goal) < TRAY_TOL
         return "pull_tray" + "_partial" * partial, self._tray_plan(target)
@@ -460,7 +462,7 @@ class TalosPlayOperator:
 
     def _plan_pot_to_tray(self):
         tray = self.read_state()[1]
-        xy = np.asarray(tasks.POT_TRAY_XY) + [self.rng.uniform(-0.015, 0.0), self.rng.uniform(-0.01, 0.01)]
+        xy = np.asarray(tasks.POT_TRAY_XY) + self.rng.uniform(-0.01, 0.01, 2)
         dest = tray_xyz(tray, xy)
         self._check = (
             lambda: np.linalg.norm(self.read_state()[3][2:5] - tray_xyz(self.read_state()[1])) < POT_TOL

@@ -39,7 +39,7 @@ dexterous workspace (checked with the IK):
   14 cm long) 5 cm in front of the panel at (0.537, 0.475, 1.085) when closed
   (:func:`door_handle_pos` gives it for any angle). Door damping 1.5, frictionloss 0.1 (it stays
   where it is released). Reachable arc: 0 .. about -1.3 rad; the primitives open to -1.2.
-* **pull-out tray = drawer below the door** (``tray_slide``, along x, range [-0.28, 0] m, 0 = in,
+* **pull-out tray = drawer below the door** (``tray_slide``, along x, range [-0.33, 0] m, 0 = in,
   negative = pulled out) in a slot z 0.74..0.90 under the compartment shelf, so it is reachable
   whatever the door angle (with the tray inside the door compartment the opened door panel lies
   across the arm's path). Vertical box-section bar handle at (0.61, 0.35, 0.80) when in
@@ -71,6 +71,7 @@ from pathlib import Path
 import numpy as np
 
 from ...extras import require, require_distribution
+from . import tasks
 
 mujoco = require("mujoco", "talos", "the Talos kitchen")
 
@@ -351,7 +352,7 @@ def _add_kitchen(spec: mujoco.MjSpec) -> None:
         name="tray_slide",
         type=mujoco.mjtJoint.mjJNT_SLIDE,
         axis=[1, 0, 0],
-        range=[-0.28, 0.0],
+        range=[tasks.TRAY_STOP, 0.0],
         limited=True,
         damping=3.0,
         frictionloss=0.2,
@@ -589,7 +590,7 @@ def door_angle(data: mujoco.MjData, handles: KitchenHandles) -> float:
 
 
 def tray_slide(data: mujoco.MjData, handles: KitchenHandles) -> float:
-    """Tray slide (m): 0 pushed in, down to -0.28 pulled out."""
+    """Tray slide (m): 0 pushed in, down to ``tasks.TRAY_STOP`` pulled out."""
     return float(data.qpos[handles.tray_qpos])
 
 
