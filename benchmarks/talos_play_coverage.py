@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lerobot_efm.envs.talos_kitchen import play, scene
+from lerobot_efm.envs.talos_kitchen import play
 
 RIM_DZ = 0.02  # m above the settled pot base height on the tray floor
 AT_REST = 1e-4  # m of pot motion per frame
@@ -44,8 +44,7 @@ def env_states(root: Path) -> tuple[np.ndarray, np.ndarray]:
 def on_rim(e: np.ndarray, episode: np.ndarray) -> tuple[int, int]:
     """(frames with the pot at rest over the tray floor, of which > RIM_DZ high)."""
     tray, pot = e[:, 1], e[:, 2:5]
-    x0, y0, z0 = scene.TRAY_POS0
-    local = pot - np.c_[x0 + tray, np.full(len(e), y0), np.full(len(e), z0 + play._TRAY_FLOOR)]
+    local = pot - (play.tray_xyz(0.0, (0.0, 0.0))[None] + np.c_[tray, np.zeros((len(e), 2))])
     over_tray = (np.abs(local[:, 0]) < 0.16) & (np.abs(local[:, 1]) < 0.15) & (local[:, 2] < 0.10)
     moved = np.r_[np.inf, np.linalg.norm(np.diff(pot, axis=0), axis=1)]
     moved[np.r_[True, episode[1:] != episode[:-1]]] = np.inf  # first frame of an episode: unknown

@@ -23,11 +23,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 
-from lerobot_efm.envs.talos_kitchen import primitives, scene, tasks  # noqa: E402
+from lerobot_efm.envs.talos_kitchen import play, primitives, scene, tasks  # noqa: E402
 from lerobot_efm.envs.talos_kitchen.env import TalosKitchenEnv  # noqa: E402
 
 ON_FLOOR_DZ = 0.02  # m above the settled height: higher, the pot rests on a rim
-SETTLED_DZ = 0.008  # m, pot base above the tray body origin when it stands on the tray floor
 
 
 def place_at(env: TalosKitchenEnv, dx: float, dy: float = 0.0) -> dict:
@@ -39,8 +38,8 @@ def place_at(env: TalosKitchenEnv, dx: float, dy: float = 0.0) -> dict:
         env.advance(c)
         last = np.asarray(c, float)
     pulled = scene.tray_slide(d, h)
-    x0, y0, z0 = scene.TRAY_POS0
-    for c in primitives.pot_pick_place(d, h, last, (x0 + pulled + dx, y0 + dy), place_z=z0 + 0.008):
+    x0, y0, _ = scene.TRAY_POS0
+    for c in primitives.pot_pick_place(d, h, last, (x0 + pulled + dx, y0 + dy), place_z=play.TRAY_TOP_Z):
         env.advance(c)
         last = np.asarray(c, float)
     home = primitives.home_command()
@@ -50,8 +49,8 @@ def place_at(env: TalosKitchenEnv, dx: float, dy: float = 0.0) -> dict:
         env.advance(home)
     pos, _ = scene.pot_pose(d, h)
     slide = scene.tray_slide(d, h)
-    rest = pos - np.array([x0 + slide, y0, z0])
-    dz = float(rest[2] - SETTLED_DZ)
+    rest = pos - np.array([x0 + slide, y0, play.TRAY_TOP_Z])
+    dz = float(rest[2])
     return {
         "dx": dx,
         "tray_pulled_to": round(pulled, 3),
