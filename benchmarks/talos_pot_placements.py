@@ -55,11 +55,16 @@ def episode_summary(rrd: dict, e: int) -> dict:
         outcome = "above the goal"
     else:
         outcome = "off target"
+    door, tray = (scalars(rrd[f"episode_{e}/objects/{name}"]) for name in ("door", "tray"))
+    goal_door, goal_tray = (scalars(rrd[f"episode_{e}/objects/goal_{name}"]) for name in ("door", "tray"))
     return {
         "episode": e,
         "success": success,
         "outcome": outcome,
         "steps": last,
+        # the other objects at the end (unload_pot also pushes the tray in, with the door left closed)
+        "final_door_error": round(door[-1][1] - goal_door[-1][1], 3),
+        "final_tray_error": round(tray[-1][1] - goal_tray[-1][1], 3),
         "pot_error_at_releases": [
             round(float(np.linalg.norm(pot[s] - goal)), 3) for s in releases if s in pot
         ],
@@ -74,7 +79,7 @@ def main() -> None:
     ap.add_argument(
         "--task",
         default="pot_to_tray",
-        choices=["pot_to_tray", "pot_to_table", "move_pot_on_table", "store_pot"],
+        choices=["pot_to_tray", "pot_to_table", "move_pot_on_table", "store_pot", "unload_pot"],
     )
     ap.add_argument("--episodes", type=int, default=10)
     ap.add_argument("--seed", type=int, default=1000)
@@ -91,11 +96,12 @@ def main() -> None:
         "",
         f"Policy `{args.policy}`; success: pot within {POT_TOL} m of the goal pot (door and tray within theirs).",
         "",
-        "| episode | outcome | steps | pot error at each release (m) | final xy error (m) | final dz (m) |",
-        "|---:|---|---:|---|---:|---:|",
+        "| episode | outcome | steps | pot error at each release (m) | final xy error (m) | final dz (m) "
+        "| final door error (rad) | final tray error (m) |",
+        "|---:|---|---:|---|---:|---:|---:|---:|",
         *(
             f"| {ep['episode']} | {ep['outcome']} | {ep['steps']} | {ep['pot_error_at_releases']} | "
-            f"{ep['final_xy_error']} | {ep['final_dz']} |"
+            f"{ep['final_xy_error']} | {ep['final_dz']} | {ep['final_door_error']} | {ep['final_tray_error']} |"
             for ep in episodes
         ),
         "",
