@@ -27,8 +27,18 @@ def scalars(rows: list[dict]) -> list[tuple[int, float]]:
     return [(r["step"], r["Scalars:scalars"][0]) for r in rows if r.get("Scalars:scalars") is not None]
 
 
-def rollouts_rrd(policy: str, task: str, episodes: int, seed: int) -> dict[str, list[dict]]:
-    """Roll ``policy`` out on a state Talos task with ``lerobot-efm-log-rollouts`` and read the ``.rrd`` back."""
+def camera_flags(policy: str) -> list[str]:
+    """The env flags a checkpoint needs: its camera size if it reads one, else the camera-free state env."""
+    features = json.loads((Path(policy) / "config.json").read_text()).get("input_features", {})
+    sizes = [f["shape"][-1] for f in features.values() if f.get("type") == "VISUAL"]
+    return [f"--env.image_size={sizes[0]}"] if sizes else ["--env.obs_type=state"]
+
+
+def rollouts_rrd(
+    policy: str, task: str, episodes: int, seed: int, extra: tuple[str, ...] = ()
+) -> dict[str, list[dict]]:
+    """Roll ``policy`` out on a Talos task with ``lerobot-efm-log-rollouts`` (more flags: ``extra``) and read
+    the ``.rrd`` back."""
     from lerobot_efm.viz.rrd import read_rrd
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -38,11 +48,12 @@ def rollouts_rrd(policy: str, task: str, episodes: int, seed: int) -> dict[str, 
             f"--policy.path={policy}",
             "--env.type=talos_kitchen",
             f"--env.task={task}",
-            "--env.obs_type=state",
+            *camera_flags(policy),
             f"--eval.n_episodes={episodes}",
             f"--seed={seed}",
             "--render=false",
             f"--output={rrd_path}",
+            *extra,
         ]
         env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "HF_HUB_OFFLINE": "1"}
         subprocess.run(cmd, check=True, env=env, capture_output=True)
