@@ -34,11 +34,8 @@ def camera_flags(policy: str) -> list[str]:
     return [f"--env.image_size={sizes[0]}"] if sizes else ["--env.obs_type=state"]
 
 
-def rollouts_rrd(
-    policy: str, task: str, episodes: int, seed: int, extra: tuple[str, ...] = ()
-) -> dict[str, list[dict]]:
-    """Roll ``policy`` out on a Talos task with ``lerobot-efm-log-rollouts`` (more flags: ``extra``) and read
-    the ``.rrd`` back."""
+def rollouts_rrd(policy: str, task: str, episodes: int, seed: int) -> dict[str, list[dict]]:
+    """Roll ``policy`` out on a Talos task with ``lerobot-efm-log-rollouts`` and read the ``.rrd`` back."""
     from lerobot_efm.viz.rrd import read_rrd
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -53,7 +50,6 @@ def rollouts_rrd(
             f"--seed={seed}",
             "--render=false",
             f"--output={rrd_path}",
-            *extra,
         ]
         env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "HF_HUB_OFFLINE": "1"}
         subprocess.run(cmd, check=True, env=env, capture_output=True)
