@@ -141,6 +141,11 @@ class EFMConfig(PreTrainedConfig):
         image_random_shift: during training, shift every camera and goal image by up to this many pixels
             (edges replicated, :mod:`lerobot_efm.augment`; 0 = off, the reference's setting). Talos image FM-AC
             with 4: 14 % over 13 tasks (without, another play: 13 %; ``benchmarks/results/talos_kitchen.md``).
+        image_crop: the region of every camera image (and goal image) the policy takes, as fractions of the frame
+            [top, left, height, width], cropped before the resize to the image feature's shape, in training and at
+            deployment (:mod:`lerobot_efm.frames`). None = the whole frame. A crop to the workspace of a wide
+            camera gives its objects more of the policy's pixels; evaluate with the camera at a resolution where
+            the crop is at least the policy's image size.
         auxiliary_state_key: a recorded ``observation.*`` vector that is *not* an input (e.g. a simulator's
             ``observation.environment_state``), regressed from the latent of every observation and goal during
             training (:mod:`lerobot_efm.auxiliary`): it tells an image encoder what to look for. None = off (the
@@ -206,6 +211,7 @@ class EFMConfig(PreTrainedConfig):
     image_encoder_hidden_dim: int = 512
     image_encoder_dropout: float = 0.2
     image_random_shift: int = 0
+    image_crop: tuple[float, ...] | None = None
     auxiliary_state_key: str | None = None
     auxiliary_state_weight: float = 1.0
     auxiliary_state_dim: int = 0
@@ -248,6 +254,8 @@ class EFMConfig(PreTrainedConfig):
         self.unet_down_dims = tuple(self.unet_down_dims)
         self.mlp_hidden_dims = tuple(self.mlp_hidden_dims)
         self.image_encoder_channels = tuple(self.image_encoder_channels)
+        self.image_crop = None if self.image_crop is None else tuple(float(x) for x in self.image_crop)
+        crop = self.image_crop
         checks = {
             "obs_traj_len": self.obs_traj_len >= 1,
             "obs_traj_stride": self.obs_traj_stride >= 1,
@@ -273,6 +281,15 @@ class EFMConfig(PreTrainedConfig):
             "actor_distance_scale": self.actor_distance_scale > 0.0,
             "state_fourier_frequencies": self.state_fourier_frequencies >= 0,
             "image_random_shift": self.image_random_shift >= 0,
+            "image_crop": crop is None
+            or (
+                len(crop) == 4
+                and min(crop) >= 0.0
+                and crop[2] > 0.0
+                and crop[3] > 0.0
+                and crop[0] + crop[2] <= 1.0
+                and crop[1] + crop[3] <= 1.0
+            ),
             "auxiliary_state_key": self.auxiliary_state_key is None
             or (
                 self.auxiliary_state_key.startswith(OBS_PREFIX)

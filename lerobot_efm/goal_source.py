@@ -19,7 +19,7 @@ import torch
 from lerobot.utils.keyboard_input import create_key_listener
 
 from .configuration_efm import GOAL_PREFIX, OBS_PREFIX, is_mirror_key
-from .frames import fit_frames, resize_frame
+from .frames import Crop, crop_frames, fit_frames, resize_frame
 
 log = logging.getLogger(__name__)
 
@@ -31,6 +31,7 @@ _deploy = {
     "goals": [],
     "index": 0,
     "image_shapes": {},
+    "image_crop": None,
     "warned": set(),
     "key": None,
     "key_pressed": False,
@@ -69,23 +70,29 @@ def advance_deploy_goal_on_key() -> bool:
     return True
 
 
-def set_image_shapes(shapes: dict[str, tuple[int, ...]]) -> None:
-    """The (C, H, W) the policy's cameras were trained at: live frames of another size are resized to them, and so
-    are goal images of those cameras that come with the observation (``observation.goal.images.*``)."""
+def set_image_shapes(shapes: dict[str, tuple[int, ...]], crop: Crop | None = None) -> None:
+    """The (C, H, W) the policy's cameras were trained at, and the region of the frame they were taken from
+    (``crop``, None = whole frame): live frames are cropped and resized to them, and so are goal images of those
+    cameras that come with the observation (``observation.goal.images.*``)."""
     goals = {GOAL_PREFIX + k.removeprefix(OBS_PREFIX): s for k, s in shapes.items()}
-    _deploy["image_shapes"], _deploy["warned"] = {**shapes, **goals}, set()
+    _deploy["image_shapes"], _deploy["image_crop"], _deploy["warned"] = {**shapes, **goals}, crop, set()
 
 
 def fit_live_images(observation: dict) -> dict:
     """Resize camera frames (``observation.images.*``, (C, H, W) or (B, C, H, W) floats) whose size differs from
     the checkpoint's (a robot camera set to another resolution than the recording's), warning once per camera.
     A goal image that comes with the observation (``observation.goal.images.*``, e.g. from an env that renders
-    its goal at the camera's size) is resized the same way, so goal and camera match what training saw."""
+    its goal at the camera's size) is resized the same way, so goal and camera match what training saw. A policy
+    trained on a crop of the camera (``image_crop``) gets the same crop of every frame first."""
+    crop = _deploy["image_crop"]
     for key, shape in _deploy["image_shapes"].items():
         value = observation.get(key)
-        if not isinstance(value, torch.Tensor) or tuple(value.shape[-2:]) == tuple(shape[-2:]):
+        if not isinstance(value, torch.Tensor):
             continue
-        if key not in _deploy["warned"]:
+        region = tuple(crop_frames(value, crop).shape[-2:])
+        if region == tuple(shape[-2:]) and crop is None:
+            continue
+        if key not in _deploy["warned"] and crop is None:
             log.warning(
                 "camera %s sends %s frames, the checkpoint was trained on %s: resized with OpenCV",
                 key,
@@ -93,8 +100,19 @@ def fit_live_images(observation: dict) -> dict:
                 tuple(shape),
             )
             _deploy["warned"].add(key)
+        elif key not in _deploy["warned"] and (region[0] < shape[-2] or region[1] < shape[-1]):
+            log.warning(
+                "camera %s: the crop %s of its %s frames is %s, smaller than the checkpoint's %s: upsampled; "
+                "raise the camera's resolution to give the policy the detail it was trained on",
+                key,
+                crop,
+                tuple(value.shape[-3:]),
+                region,
+                tuple(shape),
+            )
+            _deploy["warned"].add(key)
         frames = value.reshape(-1, *value.shape[-3:]).cpu()
-        resized = fit_frames(frames, shape)
+        resized = fit_frames(frames, shape, crop)
         observation[key] = resized.reshape(*value.shape[:-3], *shape).to(value.device)
     return observation
 
@@ -185,9 +203,12 @@ def read_dataset_frame(
     }
 
 
-def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> dict[str, torch.Tensor]:
+def to_goal_keys(
+    observation: dict[str, torch.Tensor], input_features: dict, crop: Crop | None = None
+) -> dict[str, torch.Tensor]:
     """Observation tensors -> the policy's goal keys, in the layout of LeRobot's inference input (float32,
-    images CHW in [0, 1]), checked against the features of the checkpoint (goal keys are in ``input_features``).
+    images CHW in [0, 1], cropped to ``crop`` as in training), checked against the features of the checkpoint
+    (goal keys are in ``input_features``).
 
     Raises with the key, the expected and the found shape when the goal does not fit the checkpoint."""
     wanted = {k: tuple(f.shape) for k, f in input_features.items() if k.startswith(GOAL_PREFIX)}
@@ -210,7 +231,9 @@ def to_goal_keys(observation: dict[str, torch.Tensor], input_features: dict) -> 
                     f"goal image {src!r} has shape {tuple(value.shape)}; the checkpoint expects "
                     f"{shape} (channels, height, width)"
                 )
-            if tuple(value.shape) != shape:
+            if crop is not None:
+                value = resize_frame(value, shape, crop)
+            elif tuple(value.shape) != shape:
                 log.warning(
                     "goal image %s is %s, the checkpoint expects %s: resized with OpenCV",
                     src,
@@ -246,7 +269,9 @@ def load_goals(config) -> list[dict[str, torch.Tensor]] | None:
         ]
     else:
         return None
-    goals = [to_goal_keys(o, config.input_features) for o in observations]
+    goals = [
+        to_goal_keys(o, config.input_features, getattr(config, "image_crop", None)) for o in observations
+    ]
     for source, goal in zip(sources, goals, strict=True):
         states = {k: [round(float(x), 4) for x in v.reshape(-1)] for k, v in goal.items() if v.dim() == 1}
         log.info(

@@ -54,6 +54,7 @@ class HindsightSpec:
     image_shapes: tuple[tuple[str, tuple[int, ...]], ...] = ()  # (key, (C, H, W)) the policy takes
     cache_frames: bool = False
     auxiliary_keys: tuple[str, ...] = ()  # recorded vectors delivered for observation and goal, not encoded
+    image_crop: tuple[float, float, float, float] | None = None  # camera region taken before the resize
 
     @classmethod
     def from_config(cls, config: EFMConfig) -> HindsightSpec:
@@ -71,6 +72,7 @@ class HindsightSpec:
             tuple((k, tuple(f.shape)) for k, f in config.image_features.items()),
             config.cache_frames,
             (config.auxiliary_state_key,) if config.auxiliary_state_key else (),
+            config.image_crop,
         )
 
     @property
@@ -136,7 +138,14 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
 
         self.image_shapes = dict(self.spec.image_shapes)
         self.frame_cache = {
-            key: DecodedFrames(base, key, self.episode_index, self.timestamps, self.image_shapes.get(key))
+            key: DecodedFrames(
+                base,
+                key,
+                self.episode_index,
+                self.timestamps,
+                self.image_shapes.get(key),
+                self.spec.image_crop,
+            )
             for key in (self.video_keys if self.spec.cache_frames else [])
         }
 
@@ -199,10 +208,14 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
             if key in self.frame_cache:
                 decoded = self.frame_cache[key].frames(flat)
             elif key in self.video_keys:
-                decoded = fit_frames(self._decode(key, flat), self.image_shapes.get(key))
+                decoded = fit_frames(
+                    self._decode(key, flat), self.image_shapes.get(key), self.spec.image_crop
+                )
             else:
                 decoded = fit_frames(
-                    torch.stack(self._base.hf_dataset[flat][key]), self.image_shapes.get(key)
+                    torch.stack(self._base.hf_dataset[flat][key]),
+                    self.image_shapes.get(key),
+                    self.spec.image_crop,
                 )
             frames = dict(zip(flat, decoded, strict=True))
             transform = (

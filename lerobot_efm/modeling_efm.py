@@ -70,7 +70,8 @@ class EFMPolicy(PreTrainedPolicy):
             )
         set_deploy_goal(goals, config.goal_advance_key)
         set_image_shapes(
-            {k: tuple(ft.shape) for k, ft in config.observation_features.items() if ".images." in k}
+            {k: tuple(ft.shape) for k, ft in config.observation_features.items() if ".images." in k},
+            config.image_crop,
         )
         self.reset()
 
