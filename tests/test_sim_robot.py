@@ -9,6 +9,7 @@ from lerobot.robots.utils import make_robot_from_config
 from lerobot.teleoperators.utils import make_teleoperator_from_config
 from test_lerobot_cli import TINY_FLAGS, run
 
+from lerobot_efm.envs.planar_push.env import SUCCESS_TOL
 from lerobot_efm.robots import ScriptedPlanarPushConfig, SimPlanarPushConfig
 from lerobot_efm.robots.sim_planar_push import ACTION_NAMES, STATE_NAMES
 
@@ -232,9 +233,9 @@ def test_a_deployed_policy_reaches_its_goal_with_lerobot_rollout(tmp_path):
     )
     driven = np.stack(LeRobotDataset("local/rollout_reach", root=rollout).hf_dataset["observation.state"])
     assert np.allclose(driven[0], states[0], atol=1e-4)  # the robot starts where the play started
-    # The reach: at some step the hand within 0.04 (the planar push env's success tolerance) of the goal's hand.
+    # The reach: at some step the hand within the planar push env's success tolerance of the goal's hand.
     hand_error = np.linalg.norm(driven[:, :2] - target[:2], axis=-1)
-    assert hand_error.min() < 0.04, (
+    assert hand_error.min() < SUCCESS_TOL, (
         f"closest approach {hand_error.min():.3f} (hand {driven[hand_error.argmin(), :2]}, goal {target[:2]})"
     )
     # The disc stays in place. The play skims it (0.285 from its centre at the closest, contact at 0.275), so
