@@ -144,8 +144,9 @@ class EFMConfig(PreTrainedConfig):
         image_crop: the region of every camera image (and goal image) the policy takes, as fractions of the frame
             [top, left, height, width], cropped before the resize to the image feature's shape, in training and at
             deployment (:mod:`lerobot_efm.frames`). None = the whole frame. A crop to the workspace of a wide
-            camera gives its objects more of the policy's pixels; evaluate with the camera at a resolution where
-            the crop is at least the policy's image size.
+            camera gives its objects more of the policy's pixels. Deploy and evaluate with the camera at a larger
+            resolution than the policy's image size: a frame of exactly that size is taken as cropped already (as
+            the training batches are).
         auxiliary_state_key: a recorded ``observation.*`` vector that is *not* an input (e.g. a simulator's
             ``observation.environment_state``), regressed from the latent of every observation and goal during
             training (:mod:`lerobot_efm.auxiliary`): it tells an image encoder what to look for. None = off (the

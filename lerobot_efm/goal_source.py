@@ -83,15 +83,18 @@ def fit_live_images(observation: dict) -> dict:
     the checkpoint's (a robot camera set to another resolution than the recording's), warning once per camera.
     A goal image that comes with the observation (``observation.goal.images.*``, e.g. from an env that renders
     its goal at the camera's size) is resized the same way, so goal and camera match what training saw. A policy
-    trained on a crop of the camera (``image_crop``) gets the same crop of every frame first."""
+    trained on a crop of the camera (``image_crop``) gets the same crop of every frame first, which therefore
+    must come at another size than the policy's input (a larger one: the crop keeps the detail)."""
     crop = _deploy["image_crop"]
     for key, shape in _deploy["image_shapes"].items():
         value = observation.get(key)
         if not isinstance(value, torch.Tensor):
             continue
-        region = tuple(crop_frames(value, crop).shape[-2:])
-        if region == tuple(shape[-2:]) and crop is None:
+        # Frames at the policy's size are taken as fitted already: training batches (cropped and resized by the
+        # hindsight dataset) pass through this step too, and must not be cropped twice.
+        if tuple(value.shape[-2:]) == tuple(shape[-2:]):
             continue
+        region = tuple(crop_frames(value, crop).shape[-2:])
         if key not in _deploy["warned"] and crop is None:
             log.warning(
                 "camera %s sends %s frames, the checkpoint was trained on %s: resized with OpenCV",
@@ -231,16 +234,15 @@ def to_goal_keys(
                     f"goal image {src!r} has shape {tuple(value.shape)}; the checkpoint expects "
                     f"{shape} (channels, height, width)"
                 )
-            if crop is not None:
+            if tuple(value.shape) != shape:  # at the policy's size: fitted already, as in fit_live_images
+                if crop is None:
+                    log.warning(
+                        "goal image %s is %s, the checkpoint expects %s: resized with OpenCV",
+                        src,
+                        tuple(value.shape),
+                        shape,
+                    )
                 value = resize_frame(value, shape, crop)
-            elif tuple(value.shape) != shape:
-                log.warning(
-                    "goal image %s is %s, the checkpoint expects %s: resized with OpenCV",
-                    src,
-                    tuple(value.shape),
-                    shape,
-                )
-                value = resize_frame(value, shape)
         else:
             value = value.float().reshape(-1) if value.dim() <= 1 else value.float()
             if tuple(value.shape) != shape:

@@ -137,6 +137,14 @@ class HindsightGoalDataset(torch.utils.data.Dataset):
         self.episode_end = np.repeat(ends, lengths)  # exclusive
 
         self.image_shapes = dict(self.spec.image_shapes)
+        unsized = [k for k in [*self.image_keys, *self.video_keys] if k not in self.image_shapes]
+        if self.spec.image_crop is not None and unsized:
+            # The pre-processor passes frames at the policy's size as fitted already (training batches) and crops
+            # the others (live cameras): a crop needs that size to be known here, and to differ from the camera's.
+            raise ValueError(
+                f"image_crop={self.spec.image_crop} needs the policy's image size of {unsized}: set it in the "
+                "policy's input_features (e.g. a shape of [3, 64, 64]), smaller than the recording's frames"
+            )
         self.frame_cache = {
             key: DecodedFrames(
                 base,

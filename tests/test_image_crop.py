@@ -5,6 +5,7 @@ dataset frame)."""
 import pytest
 import torch
 from conftest import tiny_config
+from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.policies.factory import make_policy, make_pre_post_processors
 from test_goal_source import deploy
 from test_hindsight import spec
@@ -15,6 +16,16 @@ from lerobot_efm.hindsight import HindsightGoalDataset
 
 KEY = "observation.images.top"
 CROP = (0.25, 0.5, 0.5, 0.5)  # rows 8-24, columns 16-32 of the 32x32 recording
+SHAPE = (3, 8, 8)  # the policy's image size: 2x2 box averages of the 16x16 region
+
+
+def crop_config(**overrides):
+    """A tiny FM-AC taking the crop at 8x8 (the image size must be given: see the refusal test below)."""
+    features = {
+        KEY: PolicyFeature(FeatureType.VISUAL, SHAPE),
+        "observation.state": PolicyFeature(FeatureType.STATE, (2,)),
+    }
+    return tiny_config("efm_ac", input_features=features, image_crop=list(CROP), **overrides)
 
 
 @pytest.fixture(autouse=True)
@@ -46,7 +57,7 @@ def test_training_frames_are_the_crop_region_resized(video_dataset):
 
 def test_a_deployed_policy_crops_live_frames_and_goal_images_as_in_training(video_dataset, tmp_path):
     """A checkpoint trained on the crop gets the same crop of a camera at twice the recording's resolution."""
-    cfg = tiny_config("efm_ac", image_crop=list(CROP))
+    cfg = crop_config()
     wrapped = HindsightGoalDataset(video_dataset, cfg)
     policy = make_policy(cfg, ds_meta=wrapped.meta)
     pre, post = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
@@ -63,18 +74,31 @@ def test_a_deployed_policy_crops_live_frames_and_goal_images_as_in_training(vide
             "observation.goal.state": torch.zeros(1, 2),
         }
     )
-    shape = (3, 32, 32)  # the recording's size, which the checkpoint takes
-    assert torch.allclose(processed[KEY][0], fit_frames(camera, shape, CROP)[0], atol=1e-6)
-    assert torch.allclose(processed["observation.goal.images.top"][0], fit_frames(goal, shape, CROP)[0])
-    assert not torch.allclose(processed[KEY][0], fit_frames(camera, shape)[0], atol=0.05)
+    assert torch.allclose(processed[KEY][0], fit_frames(camera, SHAPE, CROP)[0], atol=1e-6)
+    assert torch.allclose(processed["observation.goal.images.top"][0], fit_frames(goal, SHAPE, CROP)[0])
+    assert not torch.allclose(processed[KEY][0], fit_frames(camera, SHAPE)[0], atol=0.05)
     assert policy.select_action(processed).shape == (1, 2)
 
 
-def test_a_goal_from_a_dataset_frame_is_cropped(video_dataset_root):
-    from lerobot.configs.types import FeatureType, PolicyFeature
+def test_training_batches_are_not_cropped_twice(video_dataset, tmp_path):
+    """lerobot-train runs the same pre-processor on batches the hindsight dataset has cropped and resized already:
+    frames at the policy's size pass through it unchanged."""
+    cfg = crop_config()
+    wrapped = HindsightGoalDataset(video_dataset, cfg)  # built before the policy, as lerobot-train does
+    make_policy(cfg, ds_meta=wrapped.meta)
+    pre, _ = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
+    item = wrapped[5]
+    assert torch.allclose(item[KEY], region_box_average(video_dataset[5][KEY]), atol=0.5 / 255 + 1e-6)
+    batch = {k: v.unsqueeze(0) for k, v in item.items() if isinstance(v, torch.Tensor)}
+    processed = pre(batch)
+    for key in (KEY, "observation.goal.images.top"):
+        assert processed[key].shape == (1, *SHAPE)
+        assert torch.equal(processed[key][0], item[key]), key
 
+
+def test_a_goal_from_a_dataset_frame_is_cropped(video_dataset_root):
     frame = read_dataset_frame(video_dataset_root, episode=1, frame=-1)
-    features = {"observation.goal.images.top": PolicyFeature(FeatureType.VISUAL, (3, 8, 8))}
+    features = {"observation.goal.images.top": PolicyFeature(FeatureType.VISUAL, SHAPE)}
     goal = to_goal_keys(frame, features, CROP)["observation.goal.images.top"]
     assert torch.allclose(goal, region_box_average(frame[KEY]), atol=1e-5)
 
@@ -83,3 +107,8 @@ def test_a_goal_from_a_dataset_frame_is_cropped(video_dataset_root):
 def test_a_crop_outside_the_frame_is_refused_by_name(crop):
     with pytest.raises(ValueError, match="image_crop="):
         tiny_config("efm_ac", image_crop=list(crop))
+
+
+def test_a_crop_without_the_policy_image_size_is_refused(video_dataset):
+    with pytest.raises(ValueError, match=r"image_crop=.*observation.images.top.*input_features"):
+        HindsightGoalDataset(video_dataset, tiny_config("efm_ac", image_crop=list(CROP)))
