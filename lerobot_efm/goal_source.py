@@ -94,7 +94,6 @@ def fit_live_images(observation: dict) -> dict:
         # hindsight dataset) pass through this step too, and must not be cropped twice.
         if tuple(value.shape[-2:]) == tuple(shape[-2:]):
             continue
-        region = tuple(crop_frames(value, crop).shape[-2:])
         if key not in _deploy["warned"] and crop is None:
             log.warning(
                 "camera %s sends %s frames, the checkpoint was trained on %s: resized with OpenCV",
@@ -103,7 +102,9 @@ def fit_live_images(observation: dict) -> dict:
                 tuple(shape),
             )
             _deploy["warned"].add(key)
-        elif key not in _deploy["warned"] and (region[0] < shape[-2] or region[1] < shape[-1]):
+        elif key not in _deploy["warned"] and _smaller(
+            region := tuple(crop_frames(value, crop).shape[-2:]), shape
+        ):
             log.warning(
                 "camera %s: the crop %s of its %s frames is %s, smaller than the checkpoint's %s: upsampled; "
                 "raise the camera's resolution to give the policy the detail it was trained on",
@@ -118,6 +119,11 @@ def fit_live_images(observation: dict) -> dict:
         resized = fit_frames(frames, shape, crop)
         observation[key] = resized.reshape(*value.shape[:-3], *shape).to(value.device)
     return observation
+
+
+def _smaller(region: tuple[int, ...], shape: tuple[int, ...]) -> bool:
+    """Whether a cropped region is smaller than the policy's (C, H, W) input in height or width (upsampled)."""
+    return region[0] < shape[-2] or region[1] < shape[-1]
 
 
 def deploy_goal() -> dict[str, torch.Tensor]:
