@@ -112,3 +112,27 @@ def test_a_crop_outside_the_frame_is_refused_by_name(crop):
 def test_a_crop_without_the_policy_image_size_is_refused(video_dataset):
     with pytest.raises(ValueError, match=r"image_crop=.*observation.images.top.*input_features"):
         HindsightGoalDataset(video_dataset, tiny_config("efm_ac", image_crop=list(CROP)))
+
+
+def test_a_camera_too_small_for_the_crop_is_warned_about_once(video_dataset, tmp_path, caplog):
+    """A crop region smaller than the policy's input is upsampled (detail the policy never saw): the user is told
+    to raise the camera's resolution; a camera large enough is not warned about."""
+    cfg = crop_config()
+    wrapped = HindsightGoalDataset(video_dataset, cfg)
+    policy = make_policy(cfg, ds_meta=wrapped.meta)
+    pre, post = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
+    path = tmp_path / "pretrained_model"
+    for part in (policy, pre, post):
+        part.save_pretrained(path)
+    _, pre, _ = deploy(path)
+
+    def frames_of(size: int) -> dict:
+        return {"observation.state": torch.zeros(1, 2), KEY: torch.rand(1, 3, size, size)}
+
+    with caplog.at_level("WARNING", logger="lerobot_efm.goal_source"):
+        pre(frames_of(32))  # the crop is 16x16, twice the policy's 8x8
+        assert "smaller than the checkpoint's" not in caplog.text
+        pre(frames_of(12))  # the crop is 6x6
+        pre(frames_of(12))
+    warnings = [r for r in caplog.records if "smaller than the checkpoint's" in r.getMessage()]
+    assert len(warnings) == 1 and "(6, 6)" in warnings[0].getMessage()
