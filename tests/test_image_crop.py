@@ -28,6 +28,19 @@ def crop_config(**overrides):
     return tiny_config("efm_ac", input_features=features, image_crop=list(CROP), **overrides)
 
 
+def deployed_crop_policy(video_dataset, tmp_path):
+    """A checkpoint of the untrained crop policy, loaded back as lerobot-rollout does: (policy, pre-processor)."""
+    cfg = crop_config()
+    wrapped = HindsightGoalDataset(video_dataset, cfg)
+    policy = make_policy(cfg, ds_meta=wrapped.meta)
+    pre, post = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
+    path = tmp_path / "pretrained_model"
+    for part in (policy, pre, post):
+        part.save_pretrained(path)
+    policy, pre, _ = deploy(path)
+    return policy, pre
+
+
 @pytest.fixture(autouse=True)
 def _no_goal_left_behind():
     yield
@@ -57,14 +70,7 @@ def test_training_frames_are_the_crop_region_resized(video_dataset):
 
 def test_a_deployed_policy_crops_live_frames_and_goal_images_as_in_training(video_dataset, tmp_path):
     """A checkpoint trained on the crop gets the same crop of a camera at twice the recording's resolution."""
-    cfg = crop_config()
-    wrapped = HindsightGoalDataset(video_dataset, cfg)
-    policy = make_policy(cfg, ds_meta=wrapped.meta)
-    pre, post = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
-    path = tmp_path / "pretrained_model"
-    for part in (policy, pre, post):
-        part.save_pretrained(path)
-    policy, pre, _ = deploy(path)
+    policy, pre = deployed_crop_policy(video_dataset, tmp_path)
     camera, goal = torch.rand(2, 1, 3, 64, 64)
     processed = pre(
         {
@@ -117,14 +123,7 @@ def test_a_crop_without_the_policy_image_size_is_refused(video_dataset):
 def test_a_camera_too_small_for_the_crop_is_warned_about_once(video_dataset, tmp_path, caplog):
     """A crop region smaller than the policy's input is upsampled (detail the policy never saw): the user is told
     to raise the camera's resolution; a camera large enough is not warned about."""
-    cfg = crop_config()
-    wrapped = HindsightGoalDataset(video_dataset, cfg)
-    policy = make_policy(cfg, ds_meta=wrapped.meta)
-    pre, post = make_pre_post_processors(cfg, dataset_stats=wrapped.meta.stats)
-    path = tmp_path / "pretrained_model"
-    for part in (policy, pre, post):
-        part.save_pretrained(path)
-    _, pre, _ = deploy(path)
+    _, pre = deployed_crop_policy(video_dataset, tmp_path)
 
     def frames_of(size: int) -> dict:
         return {"observation.state": torch.zeros(1, 2), KEY: torch.rand(1, 3, size, size)}
