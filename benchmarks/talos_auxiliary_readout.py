@@ -71,7 +71,7 @@ def readout(loaded, root: str, frames: int, batch: int = 64) -> tuple[np.ndarray
     for start in range(0, len(rows), batch):
         items = [dataset[int(i)] for i in rows[start : start + batch]]
         obs = {
-            IMAGE: fit_frames(torch.stack([it[IMAGE] for it in items]), shape),
+            IMAGE: fit_frames(torch.stack([it[IMAGE] for it in items]), shape, cfg.image_crop),
             STATE: torch.stack([it[STATE] for it in items]),
         }
         obs = pre(obs)
