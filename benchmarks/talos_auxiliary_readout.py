@@ -60,18 +60,15 @@ def readout(loaded, root: str, frames: int, batch: int = 64) -> tuple[np.ndarray
     """(recorded, predicted) object states of ``frames`` evenly spaced frames of the recording at ``root``."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from lerobot_efm.frames import fit_frames
-
     cfg, policy, pre = loaded
     key = cfg.auxiliary_state_key
     dataset = LeRobotDataset("local/readout", root=root)
     rows = np.linspace(0, dataset.num_frames - 1, min(frames, dataset.num_frames)).astype(int)
-    shape = tuple(cfg.input_features[IMAGE].shape)
     recorded, predicted = [], []
     for start in range(0, len(rows), batch):
         items = [dataset[int(i)] for i in rows[start : start + batch]]
         obs = {
-            IMAGE: fit_frames(torch.stack([it[IMAGE] for it in items]), shape, cfg.image_crop),
+            IMAGE: torch.stack([it[IMAGE] for it in items]),  # the pre-processor crops / resizes as deployed
             STATE: torch.stack([it[STATE] for it in items]),
         }
         obs = pre(obs)
