@@ -5,15 +5,20 @@ reads the object state from the latent of camera + proprioception (:mod:`lerobot
 on recorded frames and prints, per object coordinate, the mean absolute error against the recorded value, next
 to the error of always answering the training play's mean (what a latent blind to the objects can do). Run it
 on the training play and on a recording the policy never saw (another recorder seed) to tell reading from
-remembering.
+remembering. With ``--rollout-task`` it also rolls the policy out in the Talos kitchen
+(``lerobot-efm-log-rollouts``, one thread) and reports the head's error on the frames the policy itself reached,
+at every replan: the observation's and the goal image's, split by episodes that succeeded and failed. A policy
+that reads the play's frames well but its own badly acts on a wrong belief where the play never went.
 
     python benchmarks/talos_auxiliary_readout.py --checkpoint outputs/.../checkpoints/last/pretrained_model \\
-        --dataset train=outputs/talos13/play48 --dataset heldout=outputs/talos13/play_heldout --frames 1000
+        --dataset train=outputs/talos13/play48 --dataset heldout=outputs/talos13/play_heldout --frames 1000 \\
+        --rollout-task store_pot --rollout-task push_tray --rollout-episodes 2
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shlex
 import sys
@@ -78,6 +83,58 @@ def readout(loaded, root: str, frames: int, batch: int = 64) -> tuple[np.ndarray
     return np.concatenate(recorded), np.concatenate(predicted)
 
 
+def rollout_errors(args, workdir: Path) -> list[dict]:
+    """One ``lerobot-efm-log-rollouts`` run per ``--rollout-task``: each episode's result with its task and
+    ``auxiliary_readout_error`` (mean absolute error per dimension over its replans)."""
+    from lerobot_efm.envs.talos_kitchen.env import STEPS_PER_OBJECT
+    from lerobot_efm.envs.talos_kitchen.tasks import TASKS
+    from lerobot_efm.scripts import log_rollouts
+
+    episodes = []
+    for task in args.rollout_task:
+        results = log_rollouts.main(
+            [
+                f"--policy.path={args.checkpoint}",
+                "--env.type=talos_kitchen",
+                f"--env.task={task}",
+                f"--env.image_size={args.image_size}",
+                f"--env.episode_length={STEPS_PER_OBJECT * TASKS[task].num_objects}",
+                f"--eval.n_episodes={args.rollout_episodes}",
+                f"--seed={args.seed}",
+                "--render=false",
+                f"--output={workdir / f'{task}.rrd'}",
+            ]
+        )
+        episodes += [{**r, "task": task} for r in results]
+    return episodes
+
+
+def rollout_table(episodes: list[dict]) -> list[str]:
+    """Per coordinate: the head's mean absolute error on the policy's own frames (observation: all, succeeded,
+    failed episodes) and on the goal images, each episode's mean over its replans weighted alike."""
+    groups = {
+        "rollouts: all": episodes,
+        "rollouts: succeeded": [e for e in episodes if e["success"]],
+        "rollouts: failed": [e for e in episodes if not e["success"]],
+    }
+    header = "| coordinate | " + " | ".join(f"{g} ({len(e)})" for g, e in groups.items()) + " | goal images |"
+    lines = [header, "|---|" + "---:|" * (len(groups) + 1)]
+    for label, dim, scale, unit in REPORTED:
+        cells = []
+        for group in groups.values():
+            errs = [e["auxiliary_readout_error"]["observation"][dim] for e in group]
+            cells.append(f"{np.mean(errs) * scale:.1f} {unit}" if errs else "–")
+        goal = [e["auxiliary_readout_error"]["goal"][dim] for e in episodes]
+        cells.append(f"{np.mean(goal) * scale:.1f} {unit}")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    tasks = dict.fromkeys(e["task"] for e in episodes)
+    wins = ", ".join(
+        f"{t} {sum(e['success'] for e in episodes if e['task'] == t)}/{sum(e['task'] == t for e in episodes)}"
+        for t in tasks
+    )
+    return ["", f"On the policy's own rollouts (successes: {wins}):", "", *lines]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -88,6 +145,17 @@ def main(argv=None) -> None:
     )
     parser.add_argument("--frames", type=int, default=1000, help="evenly spaced frames read per recording")
     parser.add_argument("--out", type=Path, help="also write the table to this markdown file")
+    parser.add_argument(
+        "--rollout-task", action="append", default=[], help="also roll out on this Talos task (repeatable)"
+    )
+    parser.add_argument("--rollout-episodes", type=int, default=2, help="episodes per rollout task")
+    parser.add_argument("--seed", type=int, default=1000, help="initial state of the first rollout episode")
+    parser.add_argument(
+        "--image-size", type=int, default=128, help="the env's camera size (as the policy's training play)"
+    )
+    parser.add_argument(
+        "--workdir", type=Path, default=Path("outputs/readout_rollouts"), help="the rollouts' .rrd files"
+    )
     args = parser.parse_args(argv)
 
     torch.set_num_threads(1)
@@ -99,6 +167,8 @@ def main(argv=None) -> None:
         recorded, predicted = readout(loaded, root, args.frames)
         mean = recorded.mean(0) if mean is None else mean  # the training play's mean: the blind answer
         results[name] = (recorded, predicted)
+
+    episodes = rollout_errors(args, args.workdir) if args.rollout_task else []
 
     names = list(results)
     header = "| coordinate | " + " | ".join(f"{n}: head | {n}: mean answer" for n in names) + " |"
@@ -117,6 +187,7 @@ def main(argv=None) -> None:
             f"{time.perf_counter() - start:.0f} s on one thread.",
             "",
             *lines,
+            *(rollout_table(episodes) if episodes else []),
             "",
             "```",
             "python benchmarks/talos_auxiliary_readout.py "
@@ -127,6 +198,8 @@ def main(argv=None) -> None:
     print(text)
     if args.out:
         args.out.write_text(text + "\n")
+        if episodes:  # every rollout episode's result, readout errors per dimension in the recording's units
+            args.out.with_suffix(".json").write_text(json.dumps(episodes, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -208,7 +208,7 @@ class EFMAgent(nn.Module, abc.ABC):
         )
         if config.uses_critic:
             self.critic = Critic(2 * self.latent_dim, config.num_critics, config.mlp_hidden_dims)
-        if config.auxiliary_state_key:  # training only: see lerobot_efm.auxiliary
+        if config.auxiliary_state_key:  # a training loss, read out at inference for inspection only
             self.auxiliary_head = AuxiliaryStateHead(
                 self.latent_dim, config.auxiliary_state_dim, *(auxiliary_bounds or ())
             )
@@ -405,6 +405,11 @@ class EFMAgent(nn.Module, abc.ABC):
         out = self.act(l_obs, l_goal)
         if "distance" in out:
             out["distance"] = out["distance"] * self.config.max_goal_distance  # in steps
+        if self.config.auxiliary_state_key:
+            # What the latents say about the privileged state (e.g. where the pot is), for inspection only:
+            # a rollout shows whether the camera is read as well on the policy's own states as on the play's.
+            out["auxiliary_state"] = self.auxiliary_head.predict(l_obs)
+            out["auxiliary_goal_state"] = self.auxiliary_head.predict(l_goal)
         return out
 
     def select_candidates(self, plans: Tensor, scores: Tensor) -> tuple[Tensor, Tensor]:

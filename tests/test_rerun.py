@@ -315,6 +315,79 @@ def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
     assert sum("closure" in t for t in texts) == grasps["closures"], texts
 
 
+@pytest.fixture(scope="module")
+def talos_image_checkpoint(tmp_path_factory):
+    """An untrained tiny camera + proprioception FM-AC with an auxiliary object-state head; its door reading is
+    the middle of the statistics' range (zero last-layer row): known for any camera frame."""
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies import make_pre_post_processors
+    from lerobot.policies.factory import get_policy_class
+
+    out = tmp_path_factory.mktemp("talos_image_policy") / "pretrained_model"
+    stats = talos_bounds_stats()
+    cfg = tiny_config(
+        "efm_ac",
+        input_features={
+            "observation.images.front": PolicyFeature(type=FeatureType.VISUAL, shape=(3, 32, 32)),
+            "observation.state": PolicyFeature(type=FeatureType.STATE, shape=(len(STATE_NAMES),)),
+        },
+        output_features={"action": PolicyFeature(type=FeatureType.ACTION, shape=(10,))},
+        auxiliary_state_key="observation.environment_state",
+    )
+    policy = get_policy_class("efm_ac")(cfg, dataset_stats=stats)
+    for agent in (policy.model, policy.ema_model):
+        with torch.no_grad():
+            agent.auxiliary_head.net[-1].weight[0] = 0.0
+            agent.auxiliary_head.net[-1].bias[0] = 0.0
+    preprocessor, postprocessor = make_pre_post_processors(cfg, dataset_stats=stats)
+    for part in (policy, preprocessor, postprocessor):
+        part.save_pretrained(out)
+    return out
+
+
+def test_talos_rollout_logs_what_the_camera_policy_reads(talos_image_checkpoint, tmp_path):
+    """The auxiliary head's reading of observation and goal is plotted next to the true object state at each
+    replan, and the episode's result says how far off it was, per dimension."""
+    output, length = tmp_path / "talos_image.rrd", 12
+    results = log_rollouts.main(
+        [
+            f"--policy.path={talos_image_checkpoint}",
+            "--env.type=talos_kitchen",
+            "--env.task=open_door",
+            "--env.image_size=32",
+            f"--env.episode_length={length}",
+            "--eval.n_episodes=1",
+            "--render=false",
+            f"--output={output}",
+        ]
+    )
+    stats = talos_bounds_stats()["observation.environment_state"]
+    middle = (stats["min"][0] + stats["max"][0]) / 2  # the door reading of the zeroed row, in radians
+    data = read_rrd(output)
+    ep, replans = "episode_0", [0, 6]  # n_action_steps = 6
+
+    def series(name):
+        return {r["step"]: r["Scalars:scalars"][0] for r in temporal(data[f"{ep}/objects/{name}"])}
+
+    for name in ("read_door", "read_goal_door", "read_pot_x", "read_goal_pot_x"):
+        assert sorted(series(name)) == replans, name
+    np.testing.assert_allclose(list(series("read_door").values()), middle, atol=1e-5)
+    # the observation is read from the current frame (the hand moved), the goal from the fixed goal image
+    pot_x, goal_pot_x = series("read_pot_x"), series("read_goal_pot_x")
+    assert abs(pot_x[0] - pot_x[6]) > 1e-6 and goal_pot_x[0] == pytest.approx(goal_pot_x[6], abs=1e-6)
+    errors = results[0]["auxiliary_readout_error"]
+    assert len(errors["observation"]) == len(errors["goal"]) == len(stats["min"])
+    door, goal_door = series("door"), series("goal_door")
+    np.testing.assert_allclose(
+        errors["observation"][0], np.mean([abs(middle - door[s]) for s in replans]), atol=1e-5
+    )
+    np.testing.assert_allclose(errors["goal"][0], abs(middle - goal_door[0]), atol=1e-5)
+    np.testing.assert_allclose(
+        errors["observation"][2], np.mean([abs(pot_x[s] - series("pot_x")[s]) for s in replans]), atol=1e-5
+    )
+    assert abs(goal_door[0] - door[0]) > 0.5  # open_door: observation and goal errors differ if swapped
+
+
 def test_planar_push_is_drawn_as_effector_disc_and_walls(tmp_path):
     """Planar push states are [eff_x, eff_y, obj_x, obj_y]: two points on the maze floor (not one xyz point),
     the maze's walls as boxes."""

@@ -33,6 +33,7 @@ from lerobot.configs.policies import PreTrainedConfig
 from lerobot.utils.constants import ACTION
 
 import lerobot_efm  # noqa: F401  (registers the efm_* policies and envs)
+from lerobot_efm.configuration_efm import GOAL_PREFIX, mirror_key
 from lerobot_efm.scripts import run_cli
 
 from ..viz.rollout_log import RolloutLogger
@@ -131,6 +132,7 @@ def run_episode(
     log.begin_episode(index, task=task, seed=seed)
     step, success, done, reward_sum = 0, False, False, 0.0
     infos = []
+    readout = ReadoutErrors(getattr(policy.config, "auxiliary_state_key", None))
     while not done and step < max_steps:
         obs = preprocess_observation(observation)
         obs["task"] = [task]
@@ -147,6 +149,7 @@ def run_episode(
         prediction = getattr(policy, "last_prediction", None)
         if prediction is not None and prediction is not before:  # the action queue was empty: replanned
             log.log_prediction(step, prediction)
+            readout.add(prediction, obs)
         action = postprocessor(action)
         action = env_postprocessor({ACTION: action})[ACTION]
         action_np = action.to("cpu").numpy()
@@ -186,8 +189,36 @@ def run_episode(
     }
     if infos and "grip_command" in infos[0]:  # an env that reports its grasps (the Talos kitchen)
         result["grasps"] = _log_grasps(log, infos)
+    result.update(readout.summary())
     log.end_episode(step, success)
     return result
+
+
+class ReadoutErrors:
+    """|auxiliary head's reading - true value| per dimension at every replan, for the observation and the goal,
+    when the policy has an auxiliary state head and the env hands out that state (a simulator's object state):
+    does the camera read as well on the policy's own states as on the recorded play?"""
+
+    def __init__(self, key: str | None):
+        self.key = key
+        self.errors: dict[str, list[np.ndarray]] = {"observation": [], "goal": []}
+
+    def add(self, prediction: dict, obs: dict) -> None:
+        if not self.key:
+            return
+        for name, read, true in (
+            ("observation", "auxiliary_state", self.key),
+            ("goal", "auxiliary_goal_state", mirror_key(self.key, GOAL_PREFIX)),
+        ):
+            if read in prediction and true in obs:
+                value = np.asarray(obs[true], dtype=np.float64).reshape(-1)
+                reading = prediction[read][0].detach().cpu().numpy().astype(np.float64)
+                self.errors[name].append(np.abs(reading - value))
+
+    def summary(self) -> dict:
+        """``auxiliary_readout_error``: {observation / goal: mean absolute error per dimension}, if measured."""
+        measured = {name: np.mean(e, axis=0).tolist() for name, e in self.errors.items() if e}
+        return {"auxiliary_readout_error": measured} if measured else {}
 
 
 def _log_grasps(log: RolloutLogger, infos: list[dict]) -> dict:

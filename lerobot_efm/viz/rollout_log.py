@@ -23,7 +23,9 @@ sequence) and ``time`` (``step / fps`` seconds, a duration). Entity paths (``ep`
 ``ep/obs/<key>``                   vector observations (``observation.state``, ``observation.environment_state``...),
                                    series named by ``EnvViz.dim_names``
 ``ep/objects/<name>``              object states (``EnvViz.object_series``; Talos: door, tray, pot_x/y/z), the
-                                   goal's as ``ep/objects/goal_<name>``
+                                   goal's as ``ep/objects/goal_<name>``; a policy trained with an auxiliary
+                                   state head: its reading of the camera at each replan, ``read_<name>``
+                                   and ``read_goal_<name>`` (points)
 ``ep/goal_obs/<key>``              vector goal observations (``observation.goal.state``...)
 ``ep/reward``, ``ep/success``      per step
 ``ep/info/<key>``                  numeric ``info`` entries of the env (point env: ``distance``)
@@ -166,22 +168,23 @@ class RolloutLogger:
                 rr.Points3D([np.asarray(p).reshape(3)], colors=[GOAL_COLOR], radii=0.04),
             )
 
-    def _log_object_series(self, values: dict[str, float], goal: bool) -> None:
-        """Object states (door angle...) under ``ep/objects/<name>``; the goal's, thin, under ``goal_<name>``."""
+    def _log_object_series(self, values: dict[str, float], goal: bool, readout: bool = False) -> None:
+        """Object states (door angle...) under ``ep/objects/<name>``; the goal's, thin, under ``goal_<name>``;
+        what the policy's auxiliary head reads from the camera, as points, under ``read_<name>`` /
+        ``read_goal_<name>``."""
         for j, (name, v) in enumerate(values.items()):
-            path = f"{self.ep}/objects/{'goal_' if goal else ''}{name}"
+            part = ("read_" if readout else "") + ("goal_" if goal else "")
+            path = f"{self.ep}/objects/{part}{name}"
             if path not in self._static_done:
                 self._static_done.add(path)
                 color = POINT_COLORS[(OBJECT_COLOR_OFFSET + j) % len(POINT_COLORS)]
-                self.rec.log(
-                    path,
-                    rr.SeriesLines(
-                        names=[f"goal {name}" if goal else name],
-                        colors=[color],
-                        widths=[1.0 if goal else 2.5],
-                    ),
-                    static=True,
+                label = ("read " if readout else "") + ("goal " if goal else "") + name
+                style = (
+                    rr.SeriesPoints(names=[label], colors=[color], marker_sizes=[2.0 if goal else 3.0])
+                    if readout
+                    else rr.SeriesLines(names=[label], colors=[color], widths=[1.0 if goal else 2.5])
                 )
+                self.rec.log(path, style, static=True)
             self.rec.log(path, rr.Scalars([float(v)]))
 
     def log_observation(self, step: int, observation: dict) -> None:
@@ -236,6 +239,21 @@ class RolloutLogger:
         a = to_numpy(action).reshape(-1)
         self._scalars(f"{self.ep}/action", a, [f"a{i}" for i in range(len(a))])
 
+    def _log_readout(self, prediction: dict) -> None:
+        """The auxiliary head's reading of the observation and goal (``auxiliary_state``, in the recording's
+        units), plotted as points next to the true object states, at every replan."""
+        key = getattr(getattr(self.policy, "config", None), "auxiliary_state_key", None)
+        series = self.viz.object_series.get(key)
+        for name, goal in (("auxiliary_state", False), ("auxiliary_goal_state", True)):
+            if name not in prediction:
+                continue
+            value = to_numpy(prediction[name])[0]
+            if series is not None:
+                self._log_object_series(series(value), goal=goal, readout=True)
+            else:
+                prefix = f"{self.ep}/readout/{'goal_' if goal else ''}{key.removeprefix('observation.')}"
+                self._scalars(prefix, value, self._dim_names(key, len(value)))
+
     def log_prediction(self, step: int, prediction: dict) -> None:
         """What the policy believed when it replanned at ``step`` (``policy.last_prediction``, batch row 0)."""
         self.set_step(step)
@@ -256,6 +274,7 @@ class RolloutLogger:
                 self.set_step(step + j * stride)
                 self.rec.log(path, rr.Scalars(a.astype(np.float64)))
             self.set_step(step)
+        self._log_readout(prediction)
         if "distance" in prediction:
             d = float(to_numpy(prediction["distance"]).reshape(-1)[0])
             self._series_names(f"{ep}/distance/critic", ["critic estimate (steps)"], (40, 90, 230))
