@@ -255,20 +255,26 @@ def test_talos_hand_slices_follow_the_state_names():
     )
 
 
-def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
-    """lerobot-efm-log-rollouts in the MuJoCo Talos kitchen: hand trajectories, predicted chunks and object states."""
-    output, length = tmp_path / "talos.rrd", 12
-    results = log_rollouts.main(
+def talos_open_door_rollout(checkpoint, output, length: int, *flags: str) -> list[dict]:
+    """One ``length``-step open_door episode of ``checkpoint`` logged to ``output`` (32 px camera)."""
+    return log_rollouts.main(
         [
-            f"--policy.path={talos_checkpoint}",
+            f"--policy.path={checkpoint}",
             "--env.type=talos_kitchen",
             "--env.task=open_door",
             "--env.image_size=32",
             f"--env.episode_length={length}",
             "--eval.n_episodes=1",
             f"--output={output}",
+            *flags,
         ]
     )
+
+
+def test_talos_rollout_rrd(talos_checkpoint, tmp_path):
+    """lerobot-efm-log-rollouts in the MuJoCo Talos kitchen: hand trajectories, predicted chunks and object states."""
+    output, length = tmp_path / "talos.rrd", 12
+    results = talos_open_door_rollout(talos_checkpoint, output, length)
     assert [r["length"] for r in results] == [length]
     data = read_rrd(output)
     ep, steps = "episode_0", list(range(length + 1))  # every step plus the final observation
@@ -349,18 +355,7 @@ def test_talos_rollout_logs_what_the_camera_policy_reads(talos_image_checkpoint,
     """The auxiliary head's reading of observation and goal is plotted next to the true object state at each
     replan, and the episode's result says how far off it was, per dimension."""
     output, length = tmp_path / "talos_image.rrd", 12
-    results = log_rollouts.main(
-        [
-            f"--policy.path={talos_image_checkpoint}",
-            "--env.type=talos_kitchen",
-            "--env.task=open_door",
-            "--env.image_size=32",
-            f"--env.episode_length={length}",
-            "--eval.n_episodes=1",
-            "--render=false",
-            f"--output={output}",
-        ]
-    )
+    results = talos_open_door_rollout(talos_image_checkpoint, output, length, "--render=false")
     stats = talos_bounds_stats()["observation.environment_state"]
     middle = (stats["min"][0] + stats["max"][0]) / 2  # the door reading of the zeroed row, in radians
     data = read_rrd(output)
