@@ -184,7 +184,7 @@ def main(argv=None) -> None:
     text = "\n".join(
         [
             f"Mean absolute error of the auxiliary head on recorded frames ({frames}); "
-            f"{time.perf_counter() - start:.0f} s on one thread.",
+            f"{time.perf_counter() - start:.0f} s on one thread{' with the rollouts' if episodes else ''}.",
             "",
             *lines,
             *(rollout_table(episodes) if episodes else []),
