@@ -135,6 +135,45 @@ def rollout_table(episodes: list[dict]) -> list[str]:
     return ["", f"On the policy's own rollouts (successes: {wins}):", "", *lines]
 
 
+PHASES = ("resting, not yet held", "held in the hand", "released after a hold")
+
+
+def pot_phase_lines(rrd_files: list[Path]) -> list[str]:
+    """The 3-D pot readout error at the replans of every episode in ``rrd_files``, split by where the pot was:
+    untouched at its start, in the hand (env info ``held``), or let go somewhere after a hold. A reading that
+    is only bad once the policy has moved the pot is a consequence of the carry as much as a cause."""
+    from lerobot_efm.envs.talos_kitchen.grasps import HELD_CODE
+    from lerobot_efm.viz import read_rrd
+
+    errors: dict[str, list[float]] = {phase: [] for phase in PHASES}
+    for path in rrd_files:
+        data = read_rrd(path)
+        for ep in sorted({k.split("/")[0] for k in data if k.startswith("episode_")}):
+
+            def series(name, ep=ep, data=data):
+                return {
+                    r["step"]: r["Scalars:scalars"][0]
+                    for r in data[f"{ep}/{name}"]
+                    if r.get("step") is not None
+                }
+
+            true, read = ([series(f"objects/{p}pot_{c}") for c in "xyz"] for p in ("", "read_"))
+            was_held = False
+            for step, code in sorted(series("info/held").items()):
+                holds = int(code) == HELD_CODE["pot"]
+                if step in read[0]:
+                    phase = PHASES[1] if holds else PHASES[2] if was_held else PHASES[0]
+                    errors[phase].append(
+                        float(np.linalg.norm([read[i][step] - true[i][step] for i in range(3)]))
+                    )
+                was_held |= holds
+    lines = ["| pot at the replan | replans | 3-D error: median | mean |", "|---|---:|---:|---:|"]
+    for phase, e in errors.items():
+        cells = f"{np.median(e) * 100:.1f} cm | {np.mean(e) * 100:.1f} cm" if e else "– | –"
+        lines.append(f"| {phase} | {len(e)} | {cells} |")
+    return ["", "The pot's reading by where the pot was (all rollout episodes):", "", *lines]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -188,6 +227,7 @@ def main(argv=None) -> None:
             "",
             *lines,
             *(rollout_table(episodes) if episodes else []),
+            *(pot_phase_lines(sorted(args.workdir.glob("*.rrd"))) if episodes else []),
             "",
             "```",
             "python benchmarks/talos_auxiliary_readout.py "
