@@ -227,7 +227,7 @@ def main(argv=None) -> None:
             "",
             *lines,
             *(rollout_table(episodes) if episodes else []),
-            *(pot_phase_lines(sorted(args.workdir.glob("*.rrd"))) if episodes else []),
+            *(pot_phase_lines([args.workdir / f"{t}.rrd" for t in args.rollout_task]) if episodes else []),
             "",
             "```",
             "python benchmarks/talos_auxiliary_readout.py "
