@@ -141,6 +141,10 @@ class Rows:
             None if self.obs_traj is None else self.obs_traj[keep],
         )
 
+    def detached(self) -> Rows:
+        """The same rows with latents that pass no gradient back to the encoder."""
+        return Rows(self.obs.detach(), self.goal.detach(), self.distance, self.actions, self.obs_traj)
+
     def cat(self, other: Rows) -> Rows:
         return Rows(
             torch.cat([self.obs, other.obs]),
@@ -164,10 +168,25 @@ class TrainingRows:
     num_bootstrap: int = 0  # eq. (5) rows at the end of goal_conditioned
     distance_conditioned: Rows | None = None  # for the actor / planner on d, if not all of goal_conditioned
     batch_latents: tuple[Tensor, Tensor] | None = None  # (l_o, l_g) of the batch's own rows, augmented
+    critic_rows: Rows | None = None  # the critic's rows, if not goal_conditioned (which may be detached)
+
+    def for_critic(self) -> Rows:
+        return self.goal_conditioned if self.critic_rows is None else self.critic_rows
 
     def for_distance_conditioned(self) -> Rows:
         """Rows of the components conditioned on (o, g, d): FM-AC's actor, FM-PC's planner."""
         return self.goal_conditioned if self.distance_conditioned is None else self.distance_conditioned
+
+    def without_encoder_gradients(self) -> TrainingRows:
+        """The rows the non-critic components see with ``actor_encoder_gradients=False``."""
+        return TrainingRows(
+            self.goal_conditioned.detached(),
+            self.goal_free.detached(),
+            self.num_bootstrap,
+            None if self.distance_conditioned is None else self.distance_conditioned.detached(),
+            self.batch_latents,
+            critic_rows=self.for_critic(),
+        )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -368,7 +387,9 @@ class EFMAgent(nn.Module, abc.ABC):
     ) -> tuple[Tensor, dict[str, float]]:
         """``step``: updates done so far (the RL warm-up and ramp read it; None = RL fully on)."""
         rows = self.training_rows(batch, target, step)
-        losses = self.losses(rows)
+        losses = self.losses(
+            rows if self.config.actor_encoder_gradients else rows.without_encoder_gradients()
+        )
         if self.config.auxiliary_state_key:
             losses["auxiliary_state"] = self.auxiliary_state_loss(batch, rows.batch_latents)
         weights = {
@@ -442,9 +463,9 @@ class FMAC(EFMAgent):
         self.actor = self._actor(2 * latent_dim + 1)
 
     def losses(self, rows):
-        r, a = rows.goal_conditioned, rows.for_distance_conditioned()
+        a = rows.for_distance_conditioned()
         return {
-            "critic": self.critic_loss(r),
+            "critic": self.critic_loss(rows.for_critic()),
             "actor": self.actor.loss(torch.cat([a.obs, a.goal, a.distance[:, None]], -1), a.actions),
         }
 
@@ -465,9 +486,9 @@ class FMPC(EFMAgent):
         self.actor = self._actor(latent_dim * (1 + self.config.obs_traj_len))
 
     def losses(self, rows):
-        r, f, p = rows.goal_conditioned, rows.goal_free, rows.for_distance_conditioned()
+        f, p = rows.goal_free, rows.for_distance_conditioned()
         return {
-            "critic": self.critic_loss(r),
+            "critic": self.critic_loss(rows.for_critic()),
             "planner": self.planner.loss(
                 torch.cat([p.obs, p.goal, p.distance[:, None]], -1), self.plan_target(p.obs_traj)
             ),
@@ -496,9 +517,9 @@ class FMPS(EFMAgent):
         self.actor = self._actor(latent_dim * (1 + self.config.obs_traj_len))
 
     def losses(self, rows):
-        r, f = rows.goal_conditioned, rows.goal_free
+        f = rows.goal_free
         return {
-            "critic": self.critic_loss(r),
+            "critic": self.critic_loss(rows.for_critic()),
             "planner": self.planner.loss(f.obs, self.plan_target(f.obs_traj)),
             "actor": self.actor.loss(torch.cat([f.obs, f.obs_traj.flatten(1)], -1), f.actions),
         }
@@ -532,9 +553,9 @@ class FMAS(EFMAgent):
         self.world = self._obs_traj_flow(latent_dim + self.config.action_traj_len * action_dim)
 
     def losses(self, rows):
-        r, f = rows.goal_conditioned, rows.goal_free
+        f = rows.goal_free
         return {
-            "critic": self.critic_loss(r),
+            "critic": self.critic_loss(rows.for_critic()),
             "actor": self.actor.loss(f.obs, f.actions),
             "world": self.world.loss(
                 torch.cat([f.obs, f.actions.flatten(1)], -1), self.plan_target(f.obs_traj)

@@ -156,6 +156,11 @@ class EFMConfig(PreTrainedConfig):
         state_encoder: "identity" (reference), "mlp" or "fourier" for vector observations; state_latent_dim
             for "mlp". "fourier" appends sin/cos(2^k pi x) for k < state_fourier_frequencies to each normalised
             coordinate (no parameters): a critic on raw positions reads a maze as open space for long.
+        actor_encoder_gradients: whether the actor / planner / world-model losses train the encoder (True: the
+            reference, one encoder trained by every loss). False: they read the latents detached, so only the
+            critic (and ``auxiliary_state_key``'s loss) shapes the encoder, as pixel-based SAC-AE / DrQ do: an
+            imitation loss rewards latents that tell play segments apart (and so their pace), the critic's
+            rewards latents that measure progress to the goal.
     """
 
     n_obs_steps: int = 1
@@ -219,6 +224,7 @@ class EFMConfig(PreTrainedConfig):
     state_encoder: str = "identity"
     state_latent_dim: int = 128
     state_fourier_frequencies: int = 6
+    actor_encoder_gradients: bool = True
 
     # LeRobot normalises observations, goals (with the statistics of the observation they mirror) and
     # actions; MIN_MAX maps positions to [-1, 1] like the reference's raw planar coordinates.
@@ -327,6 +333,11 @@ class EFMConfig(PreTrainedConfig):
             )
         if self.use_rl and not self.uses_critic:
             raise ValueError(f"use_rl needs a critic; {type(self).__name__} (FM-GC) has none.")
+        if not (self.actor_encoder_gradients or self.uses_critic or self.auxiliary_state_key):
+            raise ValueError(
+                f"actor_encoder_gradients=False leaves {type(self).__name__} (FM-GC) no loss that trains the "
+                "encoder: set auxiliary_state_key, or keep actor_encoder_gradients=True."
+            )
 
     # --- agent composition (Table I) ---------------------------------------------------------------
     @property

@@ -689,3 +689,41 @@ def test_processor_normalises_mirrors_with_the_observation_stats(tmp_path):
     post.save_pretrained(tmp_path)
     reloaded, _ = make_pre_post_processors(cfg, pretrained_path=str(tmp_path))
     check(reloaded({k: v.clone() for k, v in batch.items()}))
+
+
+# --------------------------------------------------------------------------------------------------
+# actor_encoder_gradients: which losses train the encoder
+# --------------------------------------------------------------------------------------------------
+
+
+def _encoder_gradients_by_loss(policy):
+    """{loss name: does it reach the encoder's parameters?} for one training batch through compute_loss."""
+    agent, captured = policy.model, {}
+    losses = agent.losses
+    agent.losses = lambda rows: captured.update(losses(rows)) or captured
+    agent.compute_loss(hand_batch(policy.config, 6), policy.ema_model)
+    params = list(agent.encoder.parameters())
+    reached = {}
+    for name, loss in captured.items():
+        grads = torch.autograd.grad(loss, params, retain_graph=True, allow_unused=True)
+        reached[name] = any(g is not None and g.abs().sum() > 0 for g in grads)
+    return reached
+
+
+@pytest.mark.parametrize("policy_type", CRITIC_TYPES)
+def test_without_actor_encoder_gradients_only_the_critic_trains_the_encoder(policy_type):
+    """``actor_encoder_gradients=False``: actor / planner / world losses leave the encoder alone, the critic's
+    trains it. Fails if a component's latents are not detached, or if the critic's are."""
+    torch.manual_seed(0)
+    reference = _encoder_gradients_by_loss(make(policy_type, state_encoder="mlp"))
+    assert all(reference.values()), reference  # the reference: every loss trains the encoder
+    detached = _encoder_gradients_by_loss(
+        make(policy_type, state_encoder="mlp", actor_encoder_gradients=False)
+    )
+    assert detached == {name: name == "critic" for name in reference}, detached
+
+
+def test_fm_gc_without_actor_encoder_gradients_needs_another_encoder_loss():
+    with pytest.raises(ValueError, match="actor_encoder_gradients=False"):
+        state_config("efm_gc", actor_encoder_gradients=False)
+    state_config("efm_gc", actor_encoder_gradients=False, auxiliary_state_key="observation.environment_state")
