@@ -145,9 +145,12 @@ def pot_phase_lines(rrd_files: list[Path]) -> list[str]:
     from lerobot_efm.envs.talos_kitchen.grasps import HELD_CODE
     from lerobot_efm.viz import read_rrd
 
+    def wanted(entity: str) -> bool:  # not the camera frames: read whole, 13 files fill 10+ GB
+        return any(name in entity for name in ("/objects/pot_", "/objects/read_pot_", "/info/held"))
+
     errors: dict[str, list[float]] = {phase: [] for phase in PHASES}
     for path in rrd_files:
-        data = read_rrd(path)
+        data = read_rrd(path, keep=wanted)
         for ep in sorted({k.split("/")[0] for k in data if k.startswith("episode_")}):
 
             def series(name, ep=ep, data=data):

@@ -97,6 +97,8 @@ def test_rollout_rrd(checkpoints, tmp_path, policy_type, limit, num_candidates):
         assert res["length"] == expected and res["seed"] == 3 + i
         check_episode(data, i, res["length"], n_action_steps=6, num_candidates=num_candidates)
     assert "scene/wall" in data and "scene/arena" in data
+    scene = read_rrd(output, keep=lambda entity: entity.startswith("scene/"))  # only what is asked for
+    assert scene == {k: v for k, v in data.items() if k.startswith("scene/")}
     reader = RrdReader(output)
     assert (
         len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
