@@ -132,3 +132,23 @@ def test_pot_grasps_spread_along_the_handle_bar(env, monkeypatch):
     assert not _pot_grasp_points(env, monkeypatch, 5).any()  # default: at the bar's centre
     with pytest.raises(ValueError, match="pot_grasp_spread=0.06"):
         play.TalosPlayOperator(env, np.random.default_rng(0), pot_grasp_spread=0.06)
+
+
+def test_pot_to_tray_weight_option_sets_how_often_the_pot_is_loaded(env):
+    """``--operator.pot_to_tray_weight`` reaches the operator through the recorder's config and weighs the draw."""
+    from lerobot_efm.operators import OperatorConfig, register_operators
+
+    register_operators()
+    config = OperatorConfig.get_choice_class("talos_kitchen_play")(pot_to_tray_weight=9.0)
+    env.reset(seed=0)
+    op = config.build(env, np.random.default_rng(0))
+    assert op.weights["pot_to_tray"] == 9.0 and op.weights["pot_to_table"] == play.WEIGHTS["pot_to_table"]
+    assert play.TalosPlayOperator(env, np.random.default_rng(0)).weights == play.WEIGHTS  # default unchanged
+    # in the one state that allows a load (door closed, tray out, pot on the table) it is drawn
+    # 9 / (9 + push_tray 3 + pot_to_table 3 + wander 1 + home 2) = 0.5 of the times (default weights: 0.25)
+    env.set_state(tasks.TASKS["pot_to_tray"].initial)
+    assert op.feasible()["pot_to_tray"] == 9.0
+    draws = [op._start_subtask() and op.current for _ in range(200)]
+    assert 0.4 < draws.count("pot_to_tray") / 200 < 0.6, draws
+    with pytest.raises(ValueError, match="pot_to_tray_weight=-1"):
+        play.TalosPlayOperator(env, np.random.default_rng(0), pot_to_tray_weight=-1.0)

@@ -33,6 +33,9 @@ wrapped in human-like imperfections:
 * noise: temporally correlated (Ornstein-Uhlenbeck, tau 0.4 s) position noise, 3 mm per axis;
 * pot grasps: at the handle bar's centre, or anywhere within +- ``pot_grasp_spread`` of it (default 0: off).
 
+``pot_to_tray_weight`` (CLI: ``--operator.pot_to_tray_weight=9``) replaces ``pot_to_tray``'s weight: more play
+with the pot carried to, resting on and taken from the tray, the states the pot tasks of the suite pass through.
+
 A failed primitive (no weld, object not moved) is simply followed by a new choice from the real state.
 Commands are clipped to ``env.action_space`` (float32, finite). Everything random comes from the given
 ``numpy.random.Generator``, so a run is deterministic for a seed. :func:`coverage` counts how often
@@ -195,6 +198,7 @@ class TalosPlayOperator:
         noise_std: float = NOISE_STD,
         weights: dict | None = None,
         pot_grasp_spread: float = POT_GRASP_SPREAD,
+        pot_to_tray_weight: float | None = None,
     ):
         self.env, self.rng = env, rng
         self.noise_std = float(noise_std)
@@ -211,6 +215,12 @@ class TalosPlayOperator:
         unknown = set(self.weights) - set(WEIGHTS)
         if unknown:
             raise ValueError(f"unknown sub-task weights {sorted(unknown)}; valid: {sorted(WEIGHTS)}")
+        if pot_to_tray_weight is not None:
+            # the CLI's handle on the pot-on-tray share of play: pot_to_tray is drawn only in the one state that
+            # allows it (door closed, tray out, pot on the table), so its weight sets how often the pot is loaded
+            if not (np.isfinite(pot_to_tray_weight) and pot_to_tray_weight >= 0):
+                raise ValueError(f"pot_to_tray_weight={pot_to_tray_weight}: must be a finite weight >= 0")
+            self.weights["pot_to_tray"] = float(pot_to_tray_weight)
         self._home = P.home_command()
         self._ou_a = float(np.exp(-1.0 / (P.CTRL_HZ * NOISE_TAU)))
         self.stats: dict[str, dict[str, int]] = {}
